@@ -1,0 +1,271 @@
+"""BVH (Biovision hierarchy) reader, plain or gzip-compressed (``.bvh.gz``).
+
+Any hierarchy is accepted. Positions are computed by forward kinematics for every joint (and,
+optionally, every End Site). BVH has no unit field: the unit is guessed from the height of the
+rest skeleton (see :func:`guess_units`) unless given.
+"""
+
+import gzip
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ParseError
+from ..motion import UNIT_SCALES, Motion, skeleton_limbs, snap_fps, y_up_to_z_up
+from .kinematics import compose
+
+_ROT = {"Xrotation": "x", "Yrotation": "y", "Zrotation": "z"}
+_POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
+MAX_CHANNELS = 100_000
+
+
+@dataclass
+class BvhJoint:
+    name: str
+    parent: int
+    offset: np.ndarray
+    channels: list  # channel names in file order
+    first_channel: int  # column of the first channel in the motion data
+    end_site: bool = False
+
+
+@dataclass
+class BvhFile:
+    """What the file says, before any conversion: joints, raw channel values, frame time."""
+
+    path: str
+    joints: list
+    frame_time: float
+    values: np.ndarray  # (frames, channels)
+
+
+def _open_text(path):
+    try:
+        raw = open(path, "rb").read()
+    except OSError as exc:
+        raise ParseError(f"cannot read file ({exc.strerror})", path) from None
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError, zlib.error) as exc:
+            raise ParseError(f"corrupt gzip data ({exc})", path) from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def parse_bvh(path):
+    """Parse a BVH file into a :class:`BvhFile` (no kinematics)."""
+    text = _open_text(path)
+    lines = text.splitlines()
+    tokens = []  # (token, line number) of the hierarchy part
+    motion_line = None
+    for number, line in enumerate(lines, 1):
+        if line.strip().upper() == "MOTION":
+            motion_line = number
+            break
+        tokens.extend((tok, number) for tok in line.replace("{", " { ").replace("}", " } ").split())
+    if not text.strip():
+        raise ParseError("empty file", path)
+    if motion_line is None:
+        raise ParseError("no MOTION section (file truncated or not a BVH)", path)
+
+    pos = 0
+
+    def take(expect=None):
+        nonlocal pos
+        if pos >= len(tokens):
+            raise ParseError("hierarchy ends early", path, motion_line)
+        tok, number = tokens[pos]
+        pos += 1
+        if expect is not None and tok.upper() != expect:
+            raise ParseError(f"expected {expect!r}, found {tok!r}", path, number)
+        return tok, number
+
+    def number_token():
+        tok, number = take()
+        try:
+            value = float(tok)
+        except ValueError:
+            raise ParseError(f"expected a number, found {tok!r}", path, number) from None
+        if not np.isfinite(value):
+            raise ParseError(f"non-finite number {tok!r}", path, number)
+        return value
+
+    take("HIERARCHY")
+    joints = []
+    stack = []  # indices of open joints
+    n_channels = 0
+    tok, number = take()
+    if tok.upper() != "ROOT":
+        raise ParseError(f"expected ROOT, found {tok!r}", path, number)
+    kind = "ROOT"
+    while True:
+        if kind in ("ROOT", "JOINT"):
+            name, number = take()
+            end_site = False
+        else:  # End Site
+            take("SITE")
+            name = f"{joints[stack[-1]].name}_End" if stack else "End"
+            end_site = True
+        take("{")
+        take("OFFSET")
+        offset = np.array([number_token() for _ in range(3)])
+        channels = []
+        if not end_site:
+            take("CHANNELS")
+            count_tok, number = take()
+            if not count_tok.isdigit() or int(count_tok) > 6:
+                raise ParseError(f"bad channel count {count_tok!r}", path, number)
+            for _ in range(int(count_tok)):
+                ch, number = take()
+                if ch not in _ROT and ch not in _POS:
+                    raise ParseError(f"unknown channel {ch!r}", path, number)
+                channels.append(ch)
+        joints.append(BvhJoint(name, stack[-1] if stack else -1, offset, channels, n_channels,
+                               end_site))
+        n_channels += len(channels)
+        if n_channels > MAX_CHANNELS:
+            raise ParseError("too many channels", path, number)
+        stack.append(len(joints) - 1)
+        # children or closing braces
+        while True:
+            tok, number = take()
+            upper = tok.upper()
+            if upper == "}":
+                stack.pop()
+                if not stack:
+                    break
+                continue
+            if upper in ("JOINT", "END"):
+                if joints[stack[-1]].end_site:
+                    raise ParseError("an End Site cannot have children", path, number)
+                kind = upper
+                break
+            raise ParseError(f"unexpected {tok!r} in hierarchy", path, number)
+        if not stack:
+            break
+    if pos != len(tokens):
+        raise ParseError(f"unexpected {tokens[pos][0]!r} after the hierarchy", path, tokens[pos][1])
+    names = [j.name for j in joints]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ParseError(f"duplicated joint names: {', '.join(dup)}", path)
+
+    # ---- MOTION --------------------------------------------------------------------------------
+    header = lines[motion_line:motion_line + 2]
+    if len(header) < 2:
+        raise ParseError("MOTION section is truncated", path, motion_line)
+    frames_decl = _header_value(header[0], "frames:", path, motion_line + 1)
+    frame_time = _header_value(header[1], "frame time:", path, motion_line + 2)
+    if frames_decl != int(frames_decl) or frames_decl < 0:
+        raise ParseError(f"bad frame count {frames_decl}", path, motion_line + 1)
+    if not 0 < frame_time < 10:
+        raise ParseError(f"bad frame time {frame_time}", path, motion_line + 2)
+    frames_decl = int(frames_decl)
+    data_lines = [(i, l) for i, l in enumerate(lines[motion_line + 2:], motion_line + 3) if l.strip()]
+    if len(data_lines) < frames_decl:
+        raise ParseError(f"truncated: header says {frames_decl} frames, file has {len(data_lines)}",
+                         path, len(lines))
+    if len(data_lines) > frames_decl:
+        raise ParseError(f"header says {frames_decl} frames but more lines follow",
+                         path, data_lines[frames_decl][0])
+    values = np.empty((frames_decl, n_channels))
+    for row, (number, line) in enumerate(data_lines):
+        parts = line.split()
+        if len(parts) != n_channels:
+            raise ParseError(f"{len(parts)} values, expected {n_channels}", path, number)
+        try:
+            values[row] = [float(p) for p in parts]
+        except ValueError:
+            raise ParseError("non-numeric value in motion data", path, number) from None
+    if not np.isfinite(values).all():
+        bad = int(np.argwhere(~np.isfinite(values))[0, 0])
+        raise ParseError("non-finite value in motion data", path, data_lines[bad][0])
+    return BvhFile(str(path), joints, frame_time, values)
+
+
+def _header_value(line, key, path, number):
+    if not line.strip().lower().startswith(key):
+        raise ParseError(f"expected '{key}'", path, number)
+    try:
+        return float(line.split(":", 1)[1])
+    except ValueError:
+        raise ParseError(f"bad value after '{key}'", path, number) from None
+
+
+def forward_kinematics(bvh):
+    """Global joint positions in file units and axes, shape (frames, joints, 3)."""
+    frames = bvh.values.shape[0]
+    positions = np.zeros((frames, len(bvh.joints), 3))
+    rotations = np.zeros((frames, len(bvh.joints), 3, 3))
+    for j, joint in enumerate(bvh.joints):
+        local = np.broadcast_to(joint.offset, (frames, 3)).copy()
+        axes, angles = [], []
+        for k, ch in enumerate(joint.channels):
+            col = bvh.values[:, joint.first_channel + k]
+            if ch in _POS:
+                local[:, _POS[ch]] += col
+            else:
+                axes.append(_ROT[ch])
+                angles.append(np.deg2rad(col))
+        rot = compose(axes, angles) if axes else np.broadcast_to(np.eye(3), (frames, 3, 3))
+        if joint.parent < 0:
+            positions[:, j] = local
+            rotations[:, j] = rot
+        else:
+            parent_rot = rotations[:, joint.parent]
+            positions[:, j] = positions[:, joint.parent] + np.einsum("fij,fj->fi", parent_rot, local)
+            rotations[:, j] = parent_rot @ rot
+    return positions
+
+
+def guess_units(bvh):
+    """Guess the unit of a BVH from the height of its rest skeleton (a person is ~1.7 m tall).
+
+    Returns a key of :data:`~mocap_gapfill.core.motion.UNIT_SCALES`.
+    """
+    rest = np.zeros((len(bvh.joints), 3))
+    for j, joint in enumerate(bvh.joints):
+        rest[j] = joint.offset + (rest[joint.parent] if joint.parent >= 0 else 0)
+    height = float(np.ptp(rest[:, 1])) or float(np.ptp(rest)) or 1.0
+    return min(UNIT_SCALES, key=lambda u: abs(np.log(height * UNIT_SCALES[u] / 1.7)))
+
+
+def read_bvh(path, units=None, skip_frames=0, end_sites=False):
+    """Read a BVH (or ``.bvh.gz``) file into a :class:`Motion`.
+
+    Parameters
+    ----------
+    units : str, optional
+        Unit of the file (a key of ``UNIT_SCALES``); guessed from the skeleton height if None.
+    skip_frames : int
+        Leading frames to drop (converters often put a reference pose in frame 0).
+    end_sites : bool
+        Also return End Site positions (named ``<joint>_End``).
+    """
+    bvh = parse_bvh(path)
+    if units is None:
+        units = guess_units(bvh)
+    elif units not in UNIT_SCALES:
+        raise ParseError(f"unknown units {units!r} (use one of {', '.join(UNIT_SCALES)})", path)
+    if not 0 <= skip_frames <= bvh.values.shape[0]:
+        raise ParseError(f"cannot skip {skip_frames} of {bvh.values.shape[0]} frames", path)
+    bvh.values = bvh.values[skip_frames:]
+    keep = [j for j, joint in enumerate(bvh.joints) if end_sites or not joint.end_site]
+    positions = forward_kinematics(bvh)[:, keep] * UNIT_SCALES[units]
+    remap = {old: new for new, old in enumerate(keep)}
+    parents = [remap.get(bvh.joints[j].parent, -1) for j in keep]
+    return Motion(
+        positions=y_up_to_z_up(positions),
+        names=tuple(bvh.joints[j].name for j in keep),
+        fps=snap_fps(1.0 / bvh.frame_time),
+        parents=tuple(parents),
+        limbs=skeleton_limbs(parents),
+        source=str(path),
+        source_format="bvh",
+        units=units,
+        up_axis="y",
+    )

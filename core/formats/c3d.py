@@ -1,0 +1,263 @@
+"""C3D reader and writer (through ezc3d), with the guards its native code needs.
+
+ezc3d aborts or crashes the whole process on some inputs (a corrupt file, a write without a
+frame rate), which inside Blender would take the user's session down. So every file is checked
+structurally in pure Python (:func:`precheck`) before ezc3d reads it, and everything ezc3d needs is
+validated before it writes.
+
+Gaps: a sample is missing when ezc3d gives NaN (its encoding of residual < 0), when the residual is
+negative, or when the point is exactly (0, 0, 0) (how some systems write gaps). A present sample
+with residual exactly 0 was interpolated by some program: it reads as *filled*.
+"""
+
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import GapFillError, ParseError
+from ..motion import Motion, rigid_marker_pairs, y_up_to_z_up
+
+#: C3D frame counts are 16-bit in the header: more frames come back truncated from ezc3d
+MAX_FRAMES = 65535
+_UNITS = {"mm": ("mm", 0.001), "cm": ("cm", 0.01), "m": ("m", 1.0), "in": ("in", 0.0254)}
+#: observed samples get this residual on write (their true residual is not kept in a Motion)
+OBSERVED_RESIDUAL = 1.0
+
+
+def _float(raw, processor):
+    if processor == 85:  # DEC: word-swapped, exponent bias off by 2
+        return struct.unpack("<f", raw[2:4] + raw[0:2])[0] / 4.0
+    return struct.unpack(">f" if processor == 86 else "<f", raw)[0]
+
+
+def precheck(path):
+    """Check a C3D file's structure without native code; raise :class:`ParseError` if unsafe.
+
+    Checks the signature, the processor type, that every parameter record lies inside the
+    parameter section and moves forward, that dimensions and types are valid, and that the file
+    is long enough for the point and analog data the header and parameters announce.
+
+    Returns
+    -------
+    dict
+        ``points``, ``frames``, ``rate`` as announced (for messages and tests).
+    """
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise ParseError(f"cannot read file ({exc.strerror})", path) from None
+    size = len(data)
+    if size == 0:
+        raise ParseError("empty file", path)
+    if size < 1024:
+        raise ParseError(f"only {size} bytes: too short for a C3D file (truncated?)", path)
+    if data[1] != 0x50:
+        raise ParseError("not a C3D file (no C3D signature in the header)", path)
+    pblock = data[0]
+    if pblock < 2:
+        raise ParseError(f"bad parameter block pointer {pblock}", path)
+    pstart = (pblock - 1) * 512
+    if pstart + 4 > size:
+        raise ParseError("parameter section lies beyond the end of the file (truncated?)", path)
+    processor = data[pstart + 3]
+    if processor not in (84, 85, 86):
+        raise ParseError(f"unknown processor type {processor} in the parameter section", path)
+    endian = ">" if processor == 86 else "<"
+    pend = min(size, pstart + max(1, data[pstart + 2]) * 512)
+    i16 = struct.Struct(endian + "h")
+    u16 = struct.Struct(endian + "H")
+
+    groups, params = {}, {}
+    pos = pstart + 4
+    while pos + 2 <= pend:
+        nlen = struct.unpack("b", data[pos:pos + 1])[0]
+        gid = struct.unpack("b", data[pos + 1:pos + 2])[0]
+        if nlen == 0:
+            break
+        n = abs(nlen)
+        off_pos = pos + 2 + n
+        if off_pos + 2 > pend:
+            raise ParseError("parameter record runs past the parameter section", path)
+        name = data[pos + 2:off_pos].decode("latin-1").strip().upper()
+        step = i16.unpack_from(data, off_pos)[0]
+        body = off_pos + 2
+        if gid < 0:
+            if body + 1 > pend or body + 1 + data[body] > pend:
+                raise ParseError(f"group {name!r} runs past the parameter section", path)
+            groups[-gid] = name
+        else:
+            if body + 2 > pend:
+                raise ParseError(f"parameter {name!r} runs past the parameter section", path)
+            dtype = struct.unpack("b", data[body:body + 1])[0]
+            ndims = data[body + 1]
+            if dtype not in (-1, 1, 2, 4):
+                raise ParseError(f"parameter {name!r} has unknown data type {dtype}", path)
+            if ndims > 7 or body + 2 + ndims > pend:
+                raise ParseError(f"parameter {name!r} has bad dimensions", path)
+            dims = list(data[body + 2:body + 2 + ndims])
+            count = int(np.prod(dims)) if dims else 1
+            value_at = body + 2 + ndims
+            end = value_at + count * abs(dtype)
+            if end + 1 > pend or end + 1 + data[end] > pend:
+                raise ParseError(f"parameter {name!r} runs past the parameter section", path)
+            params[(gid, name)] = (dtype, dims, data[value_at:end])
+        if step == 0:
+            break
+        nxt = off_pos + step
+        if nxt <= pos or nxt > pend:
+            raise ParseError("parameter records point backwards or outside the section", path)
+        pos = nxt
+
+    def param_int(group, name):
+        for (gid, pname), (dtype, dims, raw) in params.items():
+            if groups.get(gid) == group and pname == name and dtype == 2 and len(raw) >= 2:
+                return u16.unpack_from(raw)[0]
+        return None
+
+    header_points = u16.unpack_from(data, 2)[0]
+    analog_per_frame = u16.unpack_from(data, 4)[0]
+    first, last = u16.unpack_from(data, 6)[0], u16.unpack_from(data, 8)[0]
+    scale = _float(data[12:16], processor)
+    data_start = u16.unpack_from(data, 16)[0]
+    rate = _float(data[20:24], processor)
+    if first == 0 or last < first - 1:
+        raise ParseError(f"bad frame range {first}..{last} in the header", path)
+    frames = last - first + 1
+    points = max(header_points, param_int("POINT", "USED") or 0)
+    param_start = param_int("POINT", "DATA_START")
+    starts = [s for s in (data_start, param_start) if s]
+    if not starts or min(starts) <= pblock - 1:
+        raise ParseError("bad data start block", path)
+    analog = max(analog_per_frame, (param_int("ANALOG", "USED") or 0))
+    bytes_per = 4 if scale < 0 or not np.isfinite(scale) else 2
+    needed = (max(starts) - 1) * 512 + frames * (points * 4 + analog) * bytes_per
+    if needed > size:
+        raise ParseError(f"truncated: {frames} frames of {points} points need {needed} bytes, "
+                         f"the file has {size}", path)
+    if not np.isfinite(rate) or rate < 0:
+        raise ParseError(f"bad frame rate {rate}", path)
+    return {"points": points, "frames": frames, "rate": rate}
+
+
+def _labels(parameters, count, path):
+    point = parameters["POINT"]
+    raw = []
+    for key in ["LABELS"] + [f"LABELS{i}" for i in range(2, 100)]:
+        if key not in point:
+            break
+        raw.extend(str(v).strip() for v in point[key]["value"])
+    raw = raw[:count] + [""] * (count - len(raw))
+    raw = [label if label else f"P{i}" for i, label in enumerate(raw)]
+    short = [label.split(":")[-1] or label for label in raw]  # "Male:LFHD" -> "LFHD"
+    names = [s if short.count(s) == 1 else r for s, r in zip(short, raw)]
+    seen = {}
+    for i, n in enumerate(names):  # duplicated labels in the file: keep all, numbered
+        if names.count(n) > 1:
+            seen[n] = seen.get(n, 0) + 1
+            names[i] = f"{n}#{seen[n]}"
+    return names
+
+
+def read_c3d(path):
+    """Read a C3D file into a :class:`Motion` of markers (see the module docstring for gaps)."""
+    info = precheck(path)
+    import ezc3d
+
+    try:
+        c3d = ezc3d.c3d(str(path))
+    except Exception as exc:  # ezc3d raises RuntimeError/ValueError/IndexError on bad files
+        raise ParseError(f"unreadable C3D ({exc})", path) from None
+    points = np.asarray(c3d["data"]["points"], dtype=np.float64)
+    if points.ndim != 3 or points.shape[0] < 3:
+        raise ParseError("no point data", path)
+    parameters = c3d["parameters"]
+    try:
+        rate = float(parameters["POINT"]["RATE"]["value"][0])
+    except (KeyError, IndexError, TypeError, ValueError):
+        rate = info["rate"]
+    if not np.isfinite(rate) or rate <= 0:
+        raise ParseError(f"bad frame rate {rate}", path)
+    unit_text = str((parameters["POINT"].get("UNITS", {}).get("value") or ["mm"])[0]).strip().lower()
+    if unit_text not in _UNITS:
+        raise ParseError(f"unknown point units {unit_text!r}", path)
+    units, scale = _UNITS[unit_text]
+    pos = points[:3].transpose(2, 1, 0) * scale  # (frames, points, 3)
+    residuals = c3d["data"].get("meta_points", {}).get("residuals")
+    missing = ~np.isfinite(pos).all(axis=2) | np.all(pos == 0, axis=2)
+    filled = np.zeros_like(missing)
+    if residuals is not None and np.shape(residuals)[1:] == points.shape[1:]:
+        res = np.asarray(residuals)[0].T
+        missing |= res < 0
+        filled = (res == 0) & ~missing
+    pos[missing] = np.nan
+    screen_y = str((parameters["POINT"].get("Y_SCREEN", {}).get("value") or ["+Z"])[0]).upper()
+    up = "y" if screen_y.strip() == "+Y" else "z"
+    if up == "y":
+        pos = y_up_to_z_up(pos)
+    names = _labels(parameters, pos.shape[1], path)
+    return Motion(
+        positions=pos,
+        names=tuple(names),
+        fps=rate,
+        limbs=rigid_marker_pairs(pos),
+        source=str(path),
+        source_format="c3d",
+        units=units,
+        up_axis=up,
+        filled=filled,
+    )
+
+
+def check_writable(motion):
+    """Raise :class:`GapFillError` unless ezc3d can write this motion safely and faithfully."""
+    frames, points = motion.n_frames, motion.n_points
+    if frames < 1:
+        raise GapFillError("cannot write a C3D file with no frames")
+    if frames > MAX_FRAMES:
+        raise GapFillError(f"C3D holds at most {MAX_FRAMES} frames, this motion has {frames}: "
+                           "write .npz or .csv, or split the take")
+    if points < 1:
+        raise GapFillError("cannot write a C3D file with no points")
+    if not (np.isfinite(motion.fps) and 0 < motion.fps < 1e6):
+        raise GapFillError(f"bad frame rate {motion.fps} for C3D")
+    bad = [n for n in motion.names if not n.isascii() or not n.isprintable()]
+    if bad:
+        raise GapFillError(f"C3D labels must be printable ASCII: {', '.join(map(repr, bad))}")
+    with np.errstate(invalid="ignore"):
+        if np.nanmax(np.abs(motion.positions), initial=0) > 1e6:
+            raise GapFillError("positions over 1000 km: wrong units?")
+
+
+def write_c3d(motion, path):
+    """Write a motion as a float C3D in millimetres, Z up.
+
+    Residuals: missing samples -1, filled samples 0 (the C3D convention for interpolated points),
+    observed samples :data:`OBSERVED_RESIDUAL`.
+    """
+    check_writable(motion)
+    import ezc3d
+
+    pos = motion.positions * 1000.0
+    missing = motion.missing
+    data = np.ones((4, motion.n_points, motion.n_frames))
+    data[:3] = np.where(missing[..., None], np.nan, pos).transpose(2, 1, 0)
+    residuals = np.full((1, motion.n_points, motion.n_frames), OBSERVED_RESIDUAL)
+    if motion.filled is not None:
+        residuals[0][motion.filled.T] = 0.0
+    residuals[0][missing.T] = -1.0
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [float(motion.fps)]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = tuple(motion.names)
+    c3d["data"]["points"] = data
+    c3d["data"]["meta_points"] = {
+        "residuals": residuals,
+        "camera_masks": np.zeros((7, motion.n_points, motion.n_frames), dtype=bool),
+    }
+    c3d.add_parameter("POINT", "UNITS", ["mm"])
+    c3d.add_parameter("POINT", "X_SCREEN", ["+X"])
+    c3d.add_parameter("POINT", "Y_SCREEN", ["+Z"])
+    c3d.write(str(path))
+
+
+__all__ = ["read_c3d", "write_c3d", "precheck", "check_writable", "MAX_FRAMES"]

@@ -1,0 +1,128 @@
+"""NPZ and CSV: plain position tables, our own interchange formats.
+
+NPZ arrays: ``positions`` (frames, points, 3) float64 metres Z-up with NaN for missing, ``names``
+(unicode), ``fps``; also ``parents`` (empty for markers), ``limbs``, ``filled``, ``units``,
+``up_axis``, ``format_version``. Loaded with ``allow_pickle=False``.
+
+CSV: a ``# mocap-gapfill csv 1 fps=<fps>`` line, a header ``frame,<name>.x,<name>.y,<name>.z,...``,
+then one row per frame in metres; an empty cell is a missing sample.
+"""
+
+import csv
+import io
+import zipfile
+
+import numpy as np
+
+from ..errors import ParseError
+from ..motion import Motion, rigid_marker_pairs, skeleton_limbs
+
+NPZ_VERSION = 1
+
+
+def write_npz(motion, fileobj):
+    np.savez_compressed(
+        fileobj,
+        format_version=np.int64(NPZ_VERSION),
+        positions=motion.positions,
+        names=np.array(motion.names, dtype=str),
+        fps=np.float64(motion.fps),
+        parents=np.array(motion.parents if motion.parents is not None else [], dtype=np.int64),
+        limbs=motion.limbs,
+        filled=motion.filled if motion.filled is not None else np.zeros((0, 0), dtype=bool),
+        units=np.str_(motion.units),
+        up_axis=np.str_(motion.up_axis),
+    )
+
+
+def read_npz(path):
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
+        raise ParseError(f"not a readable .npz ({exc})", path) from None
+    for key in ("positions", "names", "fps"):
+        if key not in arrays:
+            raise ParseError(f"missing array {key!r}", path)
+    version = int(arrays.get("format_version", NPZ_VERSION))
+    if version > NPZ_VERSION:
+        raise ParseError(f"written by a newer version (format {version}); update mocap-gapfill",
+                         path)
+    positions = arrays["positions"]
+    if positions.dtype.kind not in "fiu" or positions.ndim != 3 or positions.shape[-1] != 3:
+        raise ParseError(f"positions must be numbers of shape (frames, points, 3), got "
+                         f"{positions.dtype} {positions.shape}", path)
+    names = arrays["names"]
+    if names.dtype.kind != "U" or names.shape != (positions.shape[1],):
+        raise ParseError("names must be one string per point", path)
+    parents = arrays.get("parents", np.zeros(0, dtype=np.int64))
+    parents = tuple(parents.tolist()) if parents.size else None
+    filled = arrays.get("filled")
+    try:
+        return Motion(
+            positions=positions.astype(np.float64),
+            names=tuple(names.tolist()),
+            fps=float(arrays["fps"]),
+            parents=parents,
+            limbs=arrays.get("limbs", skeleton_limbs(parents) if parents else np.zeros((0, 2))),
+            source=str(path),
+            source_format="npz",
+            units=str(arrays.get("units", "m")),
+            up_axis=str(arrays.get("up_axis", "z")),
+            filled=filled if filled is not None and filled.size else None,
+        )
+    except (ValueError, TypeError) as exc:
+        raise ParseError(str(exc), path) from None
+
+
+def write_csv(motion, fileobj):
+    text = io.TextIOWrapper(fileobj, encoding="utf-8", newline="")
+    text.write(f"# mocap-gapfill csv 1 fps={motion.fps!r}\n")
+    writer = csv.writer(text)
+    writer.writerow(["frame"] + [f"{n}.{a}" for n in motion.names for a in "xyz"])
+    flat = motion.positions.reshape(motion.n_frames, -1)
+    for f, row in enumerate(flat):
+        writer.writerow([f] + ["" if np.isnan(v) else repr(float(v)) for v in row])
+    text.flush()
+    text.detach()
+
+
+def read_csv(path):
+    try:
+        with open(path, encoding="utf-8", newline="") as handle:
+            lines = handle.read().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParseError(f"cannot read CSV ({exc})", path) from None
+    if not lines or not lines[0].startswith("# mocap-gapfill csv"):
+        raise ParseError("not a mocap-gapfill CSV (first line must be '# mocap-gapfill csv 1 "
+                         "fps=...')", path, 1)
+    try:
+        fps = float(lines[0].split("fps=", 1)[1].split()[0])
+    except (IndexError, ValueError):
+        raise ParseError("no fps= on the first line", path, 1) from None
+    rows = list(csv.reader(lines[1:]))
+    if not rows:
+        raise ParseError("no header row", path, 2)
+    header = rows[0]
+    if not header or header[0] != "frame" or (len(header) - 1) % 3:
+        raise ParseError("header must be frame,<name>.x,<name>.y,<name>.z,...", path, 2)
+    names = []
+    for i in range(1, len(header), 3):
+        base = [h.rsplit(".", 1) for h in header[i:i + 3]]
+        if [b[-1] for b in base] != ["x", "y", "z"] or len({b[0] for b in base}) != 1:
+            raise ParseError(f"columns {header[i:i + 3]} are not one point's x, y, z", path, 2)
+        names.append(base[0][0])
+    values = np.full((len(rows) - 1, len(header) - 1), np.nan)
+    for r, row in enumerate(rows[1:]):
+        if len(row) != len(header):
+            raise ParseError(f"{len(row)} cells, expected {len(header)}", path, r + 3)
+        try:
+            values[r] = [float(v) if v.strip() else np.nan for v in row[1:]]
+        except ValueError:
+            raise ParseError("non-numeric cell", path, r + 3) from None
+    positions = values.reshape(len(values), len(names), 3)
+    try:
+        return Motion(positions=positions, names=tuple(names), fps=fps,
+                      limbs=rigid_marker_pairs(positions), source=str(path), source_format="csv")
+    except ValueError as exc:
+        raise ParseError(str(exc), path) from None

@@ -1,0 +1,132 @@
+"""Read and write any supported motion file, chosen by extension.
+
+| extension            | read | write |
+|----------------------|------|-------|
+| ``.c3d``             | yes  | yes   |
+| ``.bvh``, ``.bvh.gz``| yes  |       |
+| ``.amc`` (+ ASF)     | yes  |       |
+| ``.npz``             | yes  | yes   |
+| ``.csv``             | yes  | yes   |
+
+Writes are atomic (a temporary file in the same folder, then a rename), so an interrupted run
+leaves any previous file intact, and they refuse to replace an existing file unless asked.
+"""
+
+import os
+import tempfile
+from pathlib import Path
+
+from .errors import GapFillError, ParseError
+
+READ_FORMATS = (".c3d", ".bvh", ".bvh.gz", ".amc", ".npz", ".csv")
+WRITE_FORMATS = (".c3d", ".npz", ".csv")
+
+
+def _suffix(path):
+    name = Path(path).name.lower()
+    return ".bvh.gz" if name.endswith(".bvh.gz") else Path(name).suffix
+
+
+def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False):
+    """Read a motion file into a :class:`~mocap_gapfill.core.motion.Motion`.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.c3d``, ``.bvh``, ``.bvh.gz``, ``.amc``, ``.npz`` or ``.csv`` file.
+    asf : str or Path, optional
+        Skeleton for an AMC; found beside it when omitted.
+    units : str, optional
+        BVH only: its unit (``m``, ``cm``, ``mm``, ``in``, ``cmu``); guessed when omitted.
+    skip_frames : int
+        Leading frames to drop (BVH reference poses).
+    end_sites : bool
+        BVH only: include End Site points.
+
+    Raises
+    ------
+    ParseError
+        The file is missing, unreadable, corrupt, truncated or of an unknown kind.
+
+    Examples
+    --------
+    >>> from mocap_gapfill.core.io import read_motion
+    >>> read_motion("no/such/file.c3d")
+    Traceback (most recent call last):
+    ...
+    mocap_gapfill.core.errors.ParseError: no/such/file.c3d: no such file
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ParseError("no such file" if not path.exists() else "not a file", path)
+    suffix = _suffix(path)
+    if suffix in (".bvh", ".bvh.gz"):
+        from .formats.bvh import read_bvh
+
+        motion = read_bvh(path, units=units, skip_frames=skip_frames, end_sites=end_sites)
+    elif suffix == ".amc":
+        from .formats.asfamc import read_asf_amc
+
+        motion = read_asf_amc(path, asf)
+    elif suffix == ".c3d":
+        from .formats.c3d import read_c3d
+
+        motion = read_c3d(path)
+    elif suffix == ".npz":
+        from .formats.tabular import read_npz
+
+        motion = read_npz(path)
+    elif suffix == ".csv":
+        from .formats.tabular import read_csv
+
+        motion = read_csv(path)
+    elif suffix == ".asf":
+        raise ParseError("an ASF file holds a skeleton, not motion: read its AMC", path)
+    else:
+        raise ParseError(f"unknown file type {suffix or '(none)'}; readable: "
+                         f"{', '.join(READ_FORMATS)}", path)
+    if skip_frames and suffix not in (".bvh", ".bvh.gz"):
+        if skip_frames > motion.n_frames:
+            raise ParseError(f"cannot skip {skip_frames} of {motion.n_frames} frames", path)
+        motion = motion.frame_range(skip_frames)
+    return motion
+
+
+def write_motion(motion, path, overwrite=False):
+    """Write a motion to ``.c3d``, ``.npz`` or ``.csv`` (by extension), atomically.
+
+    Raises
+    ------
+    GapFillError
+        Unknown extension, an existing file without ``overwrite``, or data the format cannot hold.
+    """
+    path = Path(path)
+    suffix = _suffix(path)
+    if suffix not in WRITE_FORMATS:
+        raise GapFillError(f"cannot write {suffix or 'files without extension'}; writable: "
+                           f"{', '.join(WRITE_FORMATS)}")
+    if path.exists() and not overwrite:
+        raise GapFillError(f"{path} exists; pass overwrite (--force) to replace it")
+    if not path.parent.is_dir():
+        raise GapFillError(f"folder {path.parent} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{suffix}", dir=path.parent)
+    try:
+        if suffix == ".c3d":
+            from .formats.c3d import write_c3d
+
+            os.close(fd)
+            fd = None
+            write_c3d(motion, tmp)
+        else:
+            from .formats import tabular
+
+            with os.fdopen(fd, "wb") as handle:
+                fd = None
+                (tabular.write_npz if suffix == ".npz" else tabular.write_csv)(motion, handle)
+        os.replace(tmp, path)
+    except BaseException:
+        if fd is not None:
+            os.close(fd)
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

@@ -1,0 +1,24 @@
+"""Shared fixtures. Real data lives in ../shared/data (never copied into the repo).
+
+Set MOCAP_GAPFILL_DATA to point elsewhere. When the data is absent, data tests skip, unless
+MOCAP_GAPFILL_REQUIRE_DATA=1 (CI sets it), which turns that into a failure.
+"""
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA", ROOT.parent / "shared" / "data"))
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+@pytest.fixture(scope="session")
+def data_dir():
+    if not (DATA / "MANIFEST.md").is_file():
+        if os.environ.get("MOCAP_GAPFILL_REQUIRE_DATA") == "1":
+            pytest.fail(f"motion data not found at {DATA}")
+        pytest.skip(f"motion data not found at {DATA}")
+    return DATA

@@ -1,0 +1,126 @@
+"""Corrupt, truncated and empty files end in a ParseError: never a crash, a hang or a traceback.
+
+Reads run in a child process, so a crash in native code (ezc3d) fails the test instead of
+killing the test run; each file gets a time limit.
+"""
+
+import gzip
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+WORKER = r"""
+import json, sys
+from mocap_gapfill.core.errors import ParseError
+from mocap_gapfill.core.io import read_motion
+for line in sys.stdin:
+    path, asf = json.loads(line)
+    print(json.dumps(["start", path]), flush=True)
+    try:
+        m = read_motion(path, asf=asf)
+        print(json.dumps(["ok", path, m.n_frames]), flush=True)
+    except ParseError as exc:
+        print(json.dumps(["ParseError", path, str(exc)]), flush=True)
+    except BaseException as exc:
+        print(json.dumps(["other", path, type(exc).__name__ + ": " + str(exc)]), flush=True)
+"""
+
+
+def read_isolated(jobs, timeout=120):
+    """Read (path, asf) pairs in a child process: {path: (outcome, detail)}."""
+    proc = subprocess.run([sys.executable, "-c", WORKER], capture_output=True, text=True,
+                          input="".join(json.dumps([str(p), a and str(a)]) + "\n" for p, a in jobs),
+                          timeout=timeout)
+    outcome, last = {}, None
+    for line in proc.stdout.splitlines():
+        kind, path, *rest = json.loads(line)
+        if kind == "start":
+            last = path
+        else:
+            outcome[path] = (kind, rest[0])
+    assert proc.returncode == 0, f"reader crashed (exit {proc.returncode}) on {last}: {proc.stderr[-500:]}"
+    return outcome
+
+
+SOURCES = {
+    ".c3d": "cmu/c3d/85_02.c3d",
+    ".bvh": "cmu/bvh/mb_friendly/01_01.bvh",
+    ".bvh.gz": "cmu/bvh/daz_friendly/09/09_06.bvh.gz",
+    ".amc": "cmu/asfamc/09/09_06.amc",
+    ".asf": "cmu/asfamc/09/09.asf",
+}
+
+
+def corrupt_variants(raw, rng, suffix):
+    """(name, bytes, must_fail) variants of one file's bytes."""
+    yield "empty", b"", True
+    for frac in (0.1, 0.5, 0.9):
+        cut = int(len(raw) * frac)
+        if suffix in (".amc", ".bvh", ".asf"):
+            # cut inside a line, between two values, so whole values are lost
+            while cut < len(raw) and raw[cut:cut + 1] != b" ":
+                cut += 1
+        yield f"truncated{int(frac * 100)}", raw[:cut], True
+    yield "garbage", rng.integers(0, 256, size=4096, dtype=np.uint8).tobytes(), True
+    for i in range(12):
+        data = bytearray(raw)
+        span = min(len(data), 4096) if suffix in (".c3d", ".bvh.gz") else len(data)
+        for pos in rng.integers(0, span, size=8):
+            data[pos] = int(rng.integers(0, 256))
+        yield f"mutated{i}", bytes(data), False
+
+
+@pytest.mark.parametrize("suffix", list(SOURCES))
+def test_corrupt_files_give_parse_errors(data_dir, tmp_path, suffix):
+    rng = np.random.default_rng(sum(map(ord, suffix)))
+    raw = (data_dir / SOURCES[suffix]).read_bytes()
+    jobs, must_fail = [], set()
+    for name, data, fail in corrupt_variants(raw, rng, suffix):
+        if suffix == ".asf":  # a corrupt skeleton with a good motion
+            path = tmp_path / f"{name}.asf"
+            path.write_bytes(data)
+            jobs.append((data_dir / "cmu/asfamc/09/09_06.amc", path))
+            key = str(data_dir / "cmu/asfamc/09/09_06.amc") + "|" + name
+        else:
+            path = tmp_path / f"{name}{suffix}"
+            path.write_bytes(data)
+            jobs.append((path, data_dir / "cmu/asfamc/09/09.asf" if suffix == ".amc" else None))
+            key = str(path)
+        if fail:
+            must_fail.add(name)
+        del key
+    if suffix == ".asf":  # one job at a time: they share the AMC path
+        results = {}
+        for (amc, asf) in jobs:
+            (outcome,) = read_isolated([(amc, asf)]).values()
+            results[asf.stem] = outcome
+    else:
+        results = {p.name[:-len(suffix)]: v for p, v in
+                   ((__import__("pathlib").Path(k), v) for k, v in read_isolated(jobs).items())}
+    assert len(results) == len(jobs)
+    for name, (kind, detail) in results.items():
+        assert kind in ("ok", "ParseError"), f"{name}: {kind} {detail}"
+        if name in must_fail:
+            assert kind == "ParseError", f"{name} was accepted: {detail}"
+    assert any(kind == "ParseError" for kind, _ in results.values())
+
+
+def test_gzip_bvh_with_bad_stream(tmp_path, data_dir):
+    raw = gzip.compress((data_dir / SOURCES[".bvh"]).read_bytes()[:5000])
+    path = tmp_path / "bad.bvh.gz"
+    path.write_bytes(raw[:-20])
+    (kind, detail), = read_isolated([(path, None)]).values()
+    assert kind == "ParseError" and "gzip" in detail
+
+
+def test_missing_and_unknown_files(tmp_path):
+    (tmp_path / "notes.txt").write_text("hello")
+    out = read_isolated([(tmp_path / "nope.c3d", None), (tmp_path / "notes.txt", None),
+                         (tmp_path, None)])
+    messages = {k.rsplit("/", 1)[-1]: v for k, v in out.items()}
+    assert messages["nope.c3d"] == ("ParseError", f"{tmp_path / 'nope.c3d'}: no such file")
+    assert "unknown file type .txt" in messages["notes.txt"][1]
+    assert messages[tmp_path.name] [1].endswith("not a file")

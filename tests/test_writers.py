@@ -1,0 +1,105 @@
+"""Writers: round trips through C3D, NPZ and CSV; validation before ezc3d; atomic writes."""
+
+import numpy as np
+import pytest
+
+from mocap_gapfill.core.errors import GapFillError
+from mocap_gapfill.core.formats.c3d import MAX_FRAMES, OBSERVED_RESIDUAL
+from mocap_gapfill.core.io import read_motion, write_motion
+from mocap_gapfill.core.motion import Motion
+
+
+@pytest.fixture(scope="module")
+def with_gaps(data_dir):
+    motion = read_motion(data_dir / "cmu/c3d/01_01.c3d")
+    assert motion.missing.any()
+    return motion
+
+
+@pytest.mark.parametrize("suffix", [".c3d", ".npz", ".csv"])
+def test_round_trip_keeps_positions_and_gaps(with_gaps, tmp_path, suffix):
+    gappy = np.argsort(-with_gaps.missing.sum(axis=0))[:6]  # the points with gaps, and others
+    names = [with_gaps.names[i] for i in sorted(set(gappy) | set(range(6)))]
+    motion = with_gaps.select(names)
+    assert motion.missing.any() and not motion.missing.all()
+    out = write_motion(motion, tmp_path / f"take{suffix}")
+    back = read_motion(out)
+    assert back.names == motion.names and back.fps == motion.fps
+    np.testing.assert_array_equal(back.missing, motion.missing)
+    # C3D stores float32 millimetres: 1 micrometre is far below any marker noise
+    tol = 1e-6 if suffix == ".c3d" else 0.0
+    np.testing.assert_allclose(back.positions, motion.positions, atol=tol, equal_nan=True)
+
+
+def test_c3d_residuals_mark_filled_and_missing(tmp_path):
+    rng = np.random.default_rng(0)
+    pos = rng.normal(size=(20, 3, 3))
+    pos[5:8, 1] = np.nan
+    filled = np.zeros((20, 3), dtype=bool)
+    filled[10:12, 2] = True
+    motion = Motion(pos, ("A", "B", "C"), 100.0, filled=filled)
+    write_motion(motion, tmp_path / "m.c3d")
+    import ezc3d
+
+    res = ezc3d.c3d(str(tmp_path / "m.c3d"))["data"]["meta_points"]["residuals"][0].T
+    assert (res[5:8, 1] == -1).all()
+    assert (res[10:12, 2] == 0).all()
+    observed = ~motion.missing & ~filled
+    assert (res[observed] == OBSERVED_RESIDUAL).all()
+    back = read_motion(tmp_path / "m.c3d")
+    np.testing.assert_array_equal(back.filled, filled)
+
+
+def test_npz_keeps_skeleton(data_dir, tmp_path):
+    motion = read_motion(data_dir / "cmu/asfamc/09/09_06.amc")
+    back = read_motion(write_motion(motion, tmp_path / "run.npz"))
+    assert back.parents == motion.parents
+    np.testing.assert_array_equal(back.limbs, motion.limbs)
+    np.testing.assert_array_equal(back.positions, motion.positions)
+    assert (back.units, back.up_axis) == ("cmu", "y")
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(positions=np.zeros((MAX_FRAMES + 1, 1, 3))), "at most 65535 frames"),
+    (dict(positions=np.zeros((0, 1, 3))), "no frames"),
+    (dict(names=("Kopf\u00e4",)), "ASCII"),
+    (dict(positions=np.full((3, 1, 3), 5e6)), "wrong units"),
+])
+def test_c3d_writer_refuses_what_ezc3d_cannot_write(tmp_path, change, message):
+    base = dict(positions=np.zeros((3, 1, 3)), names=("A",), fps=120.0)
+    base.update(change)
+    with pytest.raises(GapFillError, match=message):
+        write_motion(Motion(**base), tmp_path / "x.c3d")
+    assert list(tmp_path.iterdir()) == []  # no partial file, no temporary left behind
+
+
+def test_writes_never_replace_silently_and_are_atomic(tmp_path):
+    target = tmp_path / "keep.c3d"
+    target.write_bytes(b"precious")
+    good = Motion(np.zeros((3, 1, 3)), ("A",), 120.0)
+    with pytest.raises(GapFillError, match="exists"):
+        write_motion(good, target)
+    bad = Motion(np.zeros((MAX_FRAMES + 1, 1, 3)), ("A",), 120.0)
+    with pytest.raises(GapFillError):
+        write_motion(bad, target, overwrite=True)
+    assert target.read_bytes() == b"precious"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.c3d"]
+    write_motion(good, target, overwrite=True)
+    assert read_motion(target).n_frames == 3
+
+
+def test_unknown_output_format(tmp_path):
+    with pytest.raises(GapFillError, match="cannot write .bvh"):
+        write_motion(Motion(np.zeros((3, 1, 3)), ("A",), 120.0), tmp_path / "x.bvh")
+
+
+def test_motion_validates_its_input():
+    with pytest.raises(GapFillError, match="duplicated"):
+        Motion(np.zeros((2, 2, 3)), ("A", "A"), 30.0)
+    with pytest.raises(GapFillError, match="fps"):
+        Motion(np.zeros((2, 1, 3)), ("A",), 0.0)
+    with pytest.raises(GapFillError, match="shape"):
+        Motion(np.zeros((2, 3)), ("A",), 30.0)
+    pos = np.zeros((2, 1, 3))
+    pos[0, 0, 1] = np.inf  # one bad coordinate hides the whole sample
+    assert Motion(pos, ("A",), 30.0).missing.tolist() == [[True], [False]]
