@@ -1,0 +1,243 @@
+"""Knowledge base: normalised clean poses, saved as a versioned ``.npz`` (no pickle).
+
+File arrays: ``format_version``, ``poses`` float32 (poses, points, 3) metres in the normalised
+frame, ``names``, ``fps``, ``limbs``, ``sources`` (one string per source file), ``source_index``
+(int32 per pose: which source), ``reference`` (JSON: root/left/right point names).
+"""
+
+import fnmatch
+import json
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import GapFillError, ParseError
+from .io import READ_FORMATS, read_motion
+from .normalize import Reference, find_reference, frames_of, normalize
+
+KB_VERSION = 1
+#: a cap on what a KB file may hold, checked before any array is loaded
+MAX_KB_BYTES = 8 << 30
+
+
+@dataclass(frozen=True, eq=False)
+class KnowledgeBase:
+    """Clean normalised poses and what they came from.
+
+    Parameters
+    ----------
+    poses : ndarray, shape (poses, points, 3), float32
+    names : tuple of str
+    fps : float
+    limbs : ndarray, shape (limbs, 2), int
+    sources : tuple of str
+    source_index : ndarray, shape (poses,), int32
+    """
+
+    poses: np.ndarray
+    names: tuple
+    fps: float
+    limbs: np.ndarray
+    sources: tuple
+    source_index: np.ndarray
+
+    @property
+    def size(self):
+        return self.poses.shape[0]
+
+    @property
+    def reference(self):
+        return find_reference(self.names)
+
+    def summary(self):
+        return {"poses": self.size, "points": len(self.names), "fps": self.fps,
+                "sources": len(self.sources), "names": list(self.names)}
+
+    def save(self, path, overwrite=False):
+        """Write atomically to ``path`` (``.npz``)."""
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise GapFillError(f"{path} exists; pass overwrite (--force) to replace it")
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part.npz",
+                                   dir=path.parent if str(path.parent) else ".")
+        try:
+            with os.fdopen(fd, "wb") as handle:
+                np.savez(handle, format_version=np.int64(KB_VERSION),
+                         poses=self.poses.astype(np.float32),
+                         names=np.array(self.names, dtype=str), fps=np.float64(self.fps),
+                         limbs=np.asarray(self.limbs, dtype=np.int64),
+                         sources=np.array(self.sources, dtype=str),
+                         source_index=self.source_index.astype(np.int32),
+                         reference=np.str_(json.dumps(self.reference.to_dict(self.names))))
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return path
+
+
+def load_kb(path):
+    """Load and check a knowledge-base file; :class:`ParseError` on anything unexpected."""
+    path = Path(path)
+    if not path.is_file():
+        raise ParseError("no such knowledge-base file", path)
+    if path.stat().st_size == 0:
+        raise ParseError("empty knowledge-base file (0 bytes)", path)
+    try:
+        with zipfile.ZipFile(path) as archive:
+            if sum(i.file_size for i in archive.infolist()) > MAX_KB_BYTES:
+                raise ParseError("knowledge base too large to load", path)
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except ParseError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
+        raise ParseError(f"not a knowledge-base file ({exc})", path) from None
+    needed = {"format_version", "poses", "names", "fps", "limbs", "sources", "source_index"}
+    lacking = needed - set(arrays)
+    if lacking:
+        raise ParseError(f"not a knowledge-base file: lacks {', '.join(sorted(lacking))}", path)
+    version = int(arrays["format_version"])
+    if version > KB_VERSION:
+        raise ParseError(f"knowledge base format {version} is newer than this version of "
+                         f"mocap-gapfill understands ({KB_VERSION}): update mocap-gapfill", path)
+    poses, names = arrays["poses"], arrays["names"]
+    if poses.dtype != np.float32 or poses.ndim != 3 or poses.shape[2] != 3 or not len(poses):
+        raise ParseError(f"poses must be float32 (poses, points, 3), got {poses.dtype} "
+                         f"{poses.shape}", path)
+    if names.dtype.kind != "U" or names.shape != (poses.shape[1],) or len(set(names)) != len(names):
+        raise ParseError("names must be one unique string per point", path)
+    if not np.isfinite(poses).all():
+        raise ParseError("poses contain NaN or infinite values", path)
+    fps = float(arrays["fps"])
+    limbs = arrays["limbs"]
+    index = arrays["source_index"]
+    sources = arrays["sources"]
+    if not (np.isfinite(fps) and fps > 0):
+        raise ParseError(f"bad fps {fps}", path)
+    if limbs.dtype.kind != "i" or limbs.ndim != 2 or (limbs.size and (
+            limbs.shape[1] != 2 or limbs.min() < 0 or limbs.max() >= len(names))):
+        raise ParseError("bad limbs array", path)
+    if index.shape != (len(poses),) or index.dtype.kind != "i" or (
+            index.min() < 0 or index.max() >= max(1, len(sources))):
+        raise ParseError("bad source_index array", path)
+    return KnowledgeBase(poses, tuple(names.tolist()), fps, limbs,
+                         tuple(sources.tolist()), index)
+
+
+def motion_files(sources, exclude=()):
+    """Motion files under the given files/folders, sorted, minus those matching ``exclude``."""
+    files = []
+    for src in map(Path, sources):
+        if src.is_dir():
+            files.extend(p for p in sorted(src.rglob("*"))
+                         if p.is_file() and p.name.lower().endswith(READ_FORMATS))
+        elif src.is_file():
+            files.append(src)
+        else:
+            raise GapFillError(f"no such file or folder: {src}")
+    keep = [f for f in files if not any(fnmatch.fnmatch(str(f), g) or fnmatch.fnmatch(f.name, g)
+                                        for g in exclude)]
+    return keep
+
+
+def resample(positions, fps_from, fps_to):
+    """Resample (frames, points, 3) in time by linear interpolation (exact subsampling when the
+    rates divide)."""
+    if abs(fps_from - fps_to) < 1e-6:
+        return positions
+    ratio = fps_from / fps_to
+    if abs(ratio - round(ratio)) < 1e-6:
+        return positions[::int(round(ratio))]
+    frames = positions.shape[0]
+    t_new = np.arange(0, (frames - 1) / fps_from + 1e-9, 1 / fps_to) * fps_from
+    lo = np.floor(t_new).astype(int).clip(0, frames - 1)
+    hi = (lo + 1).clip(0, frames - 1)
+    w = (t_new - lo)[:, None, None]
+    return positions[lo] * (1 - w) + positions[hi] * w
+
+
+def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_options=None,
+             progress=None, should_cancel=None, report=None):
+    """Build a :class:`KnowledgeBase` from motion files or folders.
+
+    Parameters
+    ----------
+    sources : list of path
+        Files and folders (searched recursively for readable motion files).
+    fps : float, optional
+        Resample every source to this rate (default: the first source's).
+    exclude : list of str
+        Glob patterns of paths or file names to leave out (e.g. the test trial's subject).
+    skip_frames : int
+        Leading frames dropped from every file (BVH reference poses).
+    stride : int
+        Keep every ``stride``-th pose after resampling (poses at 120 fps are very redundant).
+    progress, should_cancel, report : callables, optional
+        ``progress(fraction, message)``, ``should_cancel() -> bool``, ``report(message)``.
+
+    Only points present in every source are kept; frames with any of them missing are dropped.
+    """
+    files = motion_files(sources, exclude)
+    if not files:
+        raise GapFillError("no motion files in the knowledge-base sources")
+    report = report or (lambda message: None)
+    motions = []
+    for i, path in enumerate(files):
+        if should_cancel and should_cancel():
+            raise KeyboardInterrupt
+        if progress:
+            progress(i / len(files), f"reading {path.name}")
+        motions.append(read_motion(path, skip_frames=skip_frames, **(read_options or {})))
+    names = [n for n in motions[0].names if all(n in m.names for m in motions[1:])]
+    dropped = sorted({n for m in motions for n in m.names} - set(names))
+    if dropped:
+        report(f"points not in every source, left out of the knowledge base: {', '.join(dropped)}")
+    if len(names) < 3:
+        raise GapFillError("the sources share fewer than 3 point names: they are different "
+                           "skeletons or marker sets")
+    reference = find_reference(names)
+    fps = float(fps or motions[0].fps)
+    poses, index = [], []
+    for i, motion in enumerate(motions):
+        sub = motion.select(names)
+        pos = resample(sub.positions, motion.fps, fps)[::max(1, int(stride))]
+        complete = ~np.isnan(pos).any(axis=(1, 2))
+        pos = pos[complete]
+        if not len(pos):
+            report(f"{files[i].name}: no complete frame, skipped")
+            continue
+        root, angle = frames_of(pos, reference)
+        poses.append(normalize(pos, root, angle).astype(np.float32))
+        index.append(np.full(len(pos), i, dtype=np.int32))
+    if not poses:
+        raise GapFillError("no complete poses in the knowledge-base sources")
+    if progress:
+        progress(1.0, "done")
+    limbs = motions[0].select(names).limbs
+    return KnowledgeBase(np.concatenate(poses), tuple(names), fps, limbs,
+                         tuple(str(f) for f in files), np.concatenate(index))
+
+
+def match_names(kb, names):
+    """Indices into ``kb.names`` for the query ``names`` that the KB has, and those it lacks.
+
+    Raises :class:`GapFillError` when the two share too few points to be the same skeleton or
+    marker set, naming what is missing.
+    """
+    index = {n: i for i, n in enumerate(kb.names)}
+    common = [n for n in names if n in index]
+    lacking = [n for n in names if n not in index]
+    if len(common) < max(3, len(names) // 2):
+        raise GapFillError(
+            f"the knowledge base does not match this motion: it lacks {len(lacking)} of its "
+            f"{len(names)} points ({', '.join(lacking[:10])}{'...' if len(lacking) > 10 else ''}); "
+            f"it holds {', '.join(kb.names[:10])}{'...' if len(kb.names) > 10 else ''}")
+    return common, lacking
+
+
+__all__ = ["KnowledgeBase", "build_kb", "load_kb", "match_names", "Reference", "resample"]
