@@ -1,13 +1,17 @@
 """The ``mocap-gapfill`` command line (also ``python -m mocap_gapfill``).
 
-Subcommands: ``info`` (what is in a file), ``convert`` (any readable format to C3D, NPZ or CSV).
-Errors of the user's input are printed as one line on stderr, never as a traceback.
+Subcommands: ``info`` (what is in a file), ``convert`` (any readable format to C3D, NPZ or CSV),
+``kb build`` (a knowledge base from motion files), ``fill`` (fill the gaps of a file),
+``evaluate`` (accuracy of every method on punched gaps). Errors of the user's input are printed
+as one line on stderr, never as a traceback; Ctrl-C stops cleanly and writes nothing.
 """
 
 import argparse
 import json
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from .errors import GapFillError
 from .io import READ_FORMATS, WRITE_FORMATS, read_motion, write_motion
@@ -73,6 +77,121 @@ def cmd_convert(args):
     return 0
 
 
+class Progress:
+    """``progress(fraction, message)`` printing one updating line on stderr."""
+
+    def __init__(self, quiet=False):
+        self.quiet = quiet
+        self.last = ""
+
+    def __call__(self, fraction, message):
+        if self.quiet:
+            return
+        line = f"\r{100 * fraction:5.1f} % {message}"[:100]
+        if line != self.last:
+            sys.stderr.write(line.ljust(len(self.last)))
+            sys.stderr.flush()
+            self.last = line
+
+    def done(self):
+        if self.last and not self.quiet:
+            sys.stderr.write("\n")
+            self.last = ""
+
+
+def _report(message):
+    print(f"note: {message}", file=sys.stderr)
+
+
+def cmd_kb_build(args):
+    from .kb import build_kb
+
+    out = Path(args.output)
+    if out.exists() and not args.force:
+        raise GapFillError(f"{out} exists; pass --force to replace it")
+    progress = Progress(args.quiet)
+    kb = build_kb(args.sources, fps=args.fps, exclude=args.exclude or (),
+                  skip_frames=args.skip_frames, stride=args.stride,
+                  read_options={"units": args.units, "end_sites": args.end_sites},
+                  progress=progress, report=_report)
+    progress.done()
+    kb.save(out, overwrite=args.force)
+    print(f"wrote {out}: {kb.size} poses of {len(kb.names)} points at {kb.fps:g} fps "
+          f"from {len(kb.sources)} files")
+    return 0
+
+
+def _knn_settings(args):
+    from .recover import KnnSettings
+
+    return KnnSettings(k=args.k)
+
+
+def cmd_fill(args):
+    from .fill import NEEDS_KB, fill
+    from .kb import load_kb
+
+    src, dst = Path(args.input), Path(args.output)
+    if dst.exists() and dst.resolve() == src.resolve() and not args.force:
+        raise GapFillError("output is the input file; pass --force to replace it")
+    if dst.exists() and not args.force:
+        raise GapFillError(f"{dst} exists; pass --force to replace it")
+    motion = read_motion(src, **_read_kwargs(args))
+    kb = load_kb(args.kb) if args.kb else None
+    if kb is None and args.method in NEEDS_KB:
+        raise GapFillError(f"method {args.method!r} needs a knowledge base: -k KB.npz "
+                           "(make one with 'mocap-gapfill kb build')")
+    progress = Progress(args.quiet)
+    if args.max_gap:
+        motion, kept = _limit_gaps(motion, args.max_gap)
+    else:
+        kept = None
+    out = fill(motion, args.method, kb=kb, settings=_knn_settings(args), progress=progress,
+               report=_report)
+    progress.done()
+    if kept is not None:
+        out = out.replace(positions=np.where(kept[..., None], np.nan, out.positions),
+                          filled=out.filled & ~kept if out.filled is not None else None)
+    write_motion(out, dst, overwrite=args.force)
+    n_filled = int((motion.missing & ~out.missing).sum())
+    left = int(out.missing.sum())
+    print(f"wrote {dst}: filled {n_filled} samples with {args.method}"
+          + (f", {left} left missing" if left else ""))
+    return 0
+
+
+def _limit_gaps(motion, max_gap):
+    """Gaps longer than ``max_gap`` frames are left unfilled: the mask of those samples."""
+    kept = np.zeros(motion.missing.shape, dtype=bool)
+    for p, a, b in motion.gap_runs():
+        if b - a + 1 > max_gap:
+            kept[a:b + 1, p] = True
+    return motion, kept
+
+
+def cmd_evaluate(args):
+    from .evaluate import evaluate, table
+    from .fill import METHODS
+
+    methods = args.methods or list(METHODS)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise GapFillError(f"unknown methods: {', '.join(unknown)}")
+    progress = Progress(args.quiet)
+    results = evaluate(args.protocol, args.test, args.kb_sources, methods=methods, fps=args.fps,
+                       seed=args.seed, k=args.k, skip_frames=args.skip_frames,
+                       settings=args.settings, progress=progress, report=_report)
+    progress.done()
+    print(table(results))
+    if args.json:
+        payload = {"protocol": args.protocol, "fps": args.fps, "seed": args.seed, "k": args.k,
+                   "tests": [str(t) for t in args.test],
+                   "kb_sources": [str(s) for s in args.kb_sources], "results": results}
+        Path(args.json).write_text(json.dumps(payload, indent=1))
+        print(f"wrote {args.json}")
+    return 0
+
+
 def build_parser():
     parser = argparse.ArgumentParser(
         prog="mocap-gapfill",
@@ -91,6 +210,52 @@ def build_parser():
     p.add_argument("--force", action="store_true", help="replace OUTPUT if it exists")
     _add_read_options(p)
     p.set_defaults(func=cmd_convert)
+
+    kb = sub.add_parser("kb", help="knowledge bases").add_subparsers(dest="kb_command",
+                                                                       required=True)
+    p = kb.add_parser("build", help="build a knowledge base from motion files or folders")
+    p.add_argument("sources", nargs="+", metavar="SOURCE", help="files or folders (recursive)")
+    p.add_argument("-o", "--output", required=True, help="KB.npz to write")
+    p.add_argument("--fps", type=float, help="resample to this rate (default: the first file's)")
+    p.add_argument("--exclude", action="append", metavar="GLOB",
+                   help="leave out matching paths or file names (repeatable)")
+    p.add_argument("--stride", type=int, default=1, help="keep every N-th pose")
+    p.add_argument("--force", action="store_true", help="replace the output if it exists")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    _add_read_options(p)
+    p.set_defaults(func=cmd_kb_build)
+
+    p = sub.add_parser("fill", help="fill the gaps of a motion file")
+    p.add_argument("input", help=f"{', '.join(READ_FORMATS)}")
+    p.add_argument("-k", "--kb", help="knowledge base (.npz) for the knn and pca methods")
+    p.add_argument("-o", "--output", required=True,
+                   help=f"{', '.join(WRITE_FORMATS)} (chosen by extension)")
+    p.add_argument("--method", default="knn",
+                   choices=["knn", "linear", "spline", "svt", "pca", "intercorrelation"])
+    p.add_argument("-K", dest="k", type=int, default=256, help="neighbours per frame (knn)")
+    p.add_argument("--max-gap", type=int, metavar="FRAMES",
+                   help="leave gaps longer than this unfilled")
+    p.add_argument("--force", action="store_true", help="replace the output if it exists")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    _add_read_options(p)
+    p.set_defaults(func=cmd_fill)
+
+    p = sub.add_parser("evaluate", help="accuracy of the methods on punched gaps in real data")
+    p.add_argument("--protocol", required=True, choices=["joints", "markers", "bodyparts"])
+    p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")
+    p.add_argument("--kb-sources", nargs="+", required=True, metavar="PATH",
+                   help="knowledge-base files/folders (the test subject is left out)")
+    p.add_argument("--methods", nargs="+", metavar="METHOD", help="default: all")
+    p.add_argument("--settings", nargs="+", metavar="LABEL",
+                   help="only these settings, e.g. 'm=6,l=60' 'rate=0.2'")
+    p.add_argument("--fps", type=float, default=60.0, help="evaluation frame rate (default 60)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-K", dest="k", type=int, default=256)
+    p.add_argument("--skip-frames", type=int, default=0, metavar="N",
+                   help="drop N leading frames of every file (6 for Daz-friendly BVH)")
+    p.add_argument("--json", metavar="OUT", help="write the results as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(func=cmd_evaluate)
     return parser
 
 
@@ -102,7 +267,7 @@ def main(argv=None):
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        print("\ninterrupted: nothing was written", file=sys.stderr)
         return 130
 
 

@@ -76,18 +76,54 @@ def _interpolate_missing(values, valid):
 
 
 def frames_of(positions, reference):
-    """Per-frame root (frames, 3) and facing angle (frames,) of a motion, gaps bridged in time."""
+    """Per-frame root (frames, 3) and facing angle (frames,) of a motion, robust to gaps.
+
+    Where the reference points are missing, the root and facing are carried rigidly from the
+    nearest frames on either side that have them, using the points present in both (a 2-D
+    Kabsch fit of the turn about Z), and the two estimates are blended across the run; with no
+    usable points they are interpolated in time (held at clip ends).
+    """
     pos = np.asarray(positions, dtype=np.float64)
     root = pos[:, list(reference.root)].mean(axis=1)
     hips = pos[:, list(reference.left)].mean(axis=1) - pos[:, list(reference.right)].mean(axis=1)
     angle = np.arctan2(hips[:, 1], hips[:, 0])
-    ok_root = np.isfinite(root).all(axis=1)
-    ok_angle = np.isfinite(angle)
-    if not ok_root.any() or not ok_angle.any():
+    known = np.isfinite(root).all(axis=1) & np.isfinite(angle)
+    if not known.any():
         raise GapFillError("the root and hip points are missing in every frame: cannot normalise")
     unwrapped = np.zeros((len(angle), 1))
-    unwrapped[ok_angle, 0] = np.unwrap(angle[ok_angle])
-    return _interpolate_missing(root, ok_root), _interpolate_missing(unwrapped, ok_angle)[:, 0]
+    unwrapped[known, 0] = np.unwrap(angle[known])
+    root = _interpolate_missing(root, known)
+    angle = _interpolate_missing(unwrapped, known)[:, 0]
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], (~known).astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2]):  # runs [a, b) without the reference points
+        estimates = [e for e in (_carry(pos, root, angle, a - 1, a, b),
+                                 _carry(pos, root, angle, b, a, b)) if e is not None]
+        if len(estimates) == 2:
+            w = ((np.arange(a, b) - (a - 1)) / (b - a + 1))[:, None]
+            (r0, g0), (r1, g1) = estimates
+            root[a:b] = r0 * (1 - w) + r1 * w
+            angle[a:b] = g0 * (1 - w[:, 0]) + g1 * w[:, 0]
+        elif estimates:
+            root[a:b], angle[a:b] = estimates[0]
+    return root, angle
+
+
+def _carry(pos, root, angle, anchor, a, b):
+    """Root and angle of frames a..b-1 carried rigidly from the known frame ``anchor``."""
+    if anchor < 0 or anchor >= len(pos):
+        return None
+    seen = np.isfinite(pos[anchor, :, 0]) & np.isfinite(pos[a:b, :, 0]).all(axis=0)
+    if seen.sum() < 2:
+        return None
+    ref = pos[anchor, seen]
+    cur = pos[a:b][:, seen]
+    c0, c = ref.mean(axis=0), cur.mean(axis=1)
+    u = (ref - c0)[:, :2]
+    v = cur[..., :2] - c[:, None, :2]
+    turn = np.arctan2((u[:, 0] * v[..., 1] - u[:, 1] * v[..., 0]).sum(axis=1),
+                      (u * v).sum(axis=2).sum(axis=1))
+    offset = np.einsum("fij,j->fi", rotation_z(turn), root[anchor] - c0)
+    return c + offset, angle[anchor] + turn
 
 
 def rotation_z(angle):

@@ -1,0 +1,169 @@
+"""Accuracy evaluation on real data (METHOD.md section 4), every method on identical gaps.
+
+Protocols:
+- ``joints``: in each interval of ``l`` frames, ``m`` random points are removed for the whole
+  interval (m in {3, 6}, l in {15, 30, 60, 90, 120} at the evaluation frame rate);
+- ``markers``: in each 60-frame interval a fraction (10, 20, 30 %) of the points is removed;
+- ``bodyparts``: a whole limb or half of the body is removed for the middle half of the clip.
+
+The knowledge base is built from the sources without any file of the test trial's subject.
+Errors are RMSE in millimetres over the missing entries and over all entries (the paper's).
+"""
+
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import GapFillError
+from .fill import METHODS, fill
+from .kb import KnowledgeBase, build_kb
+from .io import read_motion
+from .recover import KnnSettings
+
+JOINT_SETTINGS = [(m, l) for m in (3, 6) for l in (15, 30, 60, 90, 120)]
+MARKER_RATES = (0.1, 0.2, 0.3)
+BODY_PARTS = ("left_arm", "right_arm", "left_leg", "right_leg", "upper_body", "lower_body",
+              "left_side", "right_side")
+_ARM = re.compile(r"(arm|hand|wrist|elbow|shoulder|sho|collar|clavicle|humerus|radius|finger|"
+                  r"thumb|index|mid|ring|pinky|wr[ab]|elb|frm|upa|fin|wri)", re.I)
+_LEG = re.compile(r"(leg|thigh|shin|foot|toe|femur|tibia|knee|kne|ankle|ank|heel|hee|tib|thi|"
+                  r"buttock|hipjoint|mt5|upleg)", re.I)
+
+
+def subject_of(path):
+    """Subject id from a file name: CMU ``07_05`` -> ``07``, HDM05 ``HDM_dg_...`` -> ``HDM_dg``."""
+    name = Path(path).name.split(".")[0]
+    if name.upper().startswith("HDM_"):
+        return "_".join(name.split("_")[:2])
+    return name.split("_")[0]
+
+
+def side_of(name):
+    low = name.lower()
+    if low.startswith(("l", "left")) and not low.startswith(("lower",)):
+        return "left"
+    if low.startswith(("r", "right")) and not low.startswith(("root", "ring")):
+        return "right"
+    return None
+
+
+def body_part_points(names, part):
+    """Indices of the points in a body part, found by name."""
+    sides = [side_of(n) for n in names]
+    arm = [bool(_ARM.search(n)) and s is not None for n, s in zip(names, sides)]
+    leg = [bool(_LEG.search(n)) and s is not None and not a for n, s, a in zip(names, sides, arm)]
+    pick = {
+        "left_arm": [a and s == "left" for a, s in zip(arm, sides)],
+        "right_arm": [a and s == "right" for a, s in zip(arm, sides)],
+        "left_leg": [g and s == "left" for g, s in zip(leg, sides)],
+        "right_leg": [g and s == "right" for g, s in zip(leg, sides)],
+        "upper_body": [not g for g in leg],
+        "lower_body": leg,
+        "left_side": [s == "left" for s in sides],
+        "right_side": [s == "right" for s in sides],
+    }[part]
+    return [i for i, p in enumerate(pick) if p]
+
+
+def punch_gaps(n_frames, n_points, protocol, setting, rng, names=None):
+    """Boolean mask (frames, points) of the samples to remove."""
+    miss = np.zeros((n_frames, n_points), dtype=bool)
+    if protocol == "joints":
+        m, l = setting
+        for s in range(0, n_frames, l):
+            miss[s:s + l, rng.choice(n_points, m, replace=False)] = True
+    elif protocol == "markers":
+        count = max(1, int(round(setting * n_points)))
+        for s in range(0, n_frames, 60):
+            miss[s:s + 60, rng.choice(n_points, count, replace=False)] = True
+    elif protocol == "bodyparts":
+        pts = body_part_points(names, setting)
+        if not pts:
+            raise GapFillError(f"no points of {setting} found by name")
+        miss[n_frames // 4: 3 * n_frames // 4, pts] = True
+    else:
+        raise GapFillError(f"unknown protocol {protocol!r}")
+    return miss
+
+
+def settings_of(protocol):
+    if protocol == "joints":
+        return [(f"m={m},l={l}", (m, l)) for m, l in JOINT_SETTINGS]
+    if protocol == "markers":
+        return [(f"rate={r}", r) for r in MARKER_RATES]
+    if protocol == "bodyparts":
+        return [(f"part={p}", p) for p in BODY_PARTS]
+    raise GapFillError(f"unknown protocol {protocol!r}")
+
+
+def kb_without(kb, subject):
+    """The knowledge base minus every pose from a file of ``subject``."""
+    keep_sources = np.array([subject_of(s) != subject for s in kb.sources])
+    keep = keep_sources[kb.source_index]
+    if not keep.any():
+        raise GapFillError(f"the knowledge base holds only subject {subject}")
+    return KnowledgeBase(kb.poses[keep], kb.names, kb.fps, kb.limbs, kb.sources,
+                         kb.source_index[keep])
+
+
+def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=256,
+             skip_frames=0, settings=None, progress=None, report=None):
+    """Run a protocol; a list of result dicts (method, setting, test, rmse_missing_mm, ...)."""
+    report = report or (lambda message: None)
+    full_kb = build_kb(kb_sources, fps=fps, skip_frames=skip_frames, report=report)
+    results = []
+    chosen = settings_of(protocol) if settings is None else [
+        s for s in settings_of(protocol) if s[0] in settings]
+    total = len(tests) * len(chosen) * len(methods)
+    done = 0
+    for test in tests:
+        truth = read_motion(test, skip_frames=skip_frames)
+        from .kb import resample
+
+        truth = truth.replace(positions=resample(truth.positions, truth.fps, fps), fps=fps,
+                              filled=None)
+        common = [n for n in truth.names if n in full_kb.names]
+        truth = truth.select(common)
+        if truth.missing.any():
+            keep = ~truth.missing.any(axis=1)
+            truth = truth.replace(positions=truth.positions[keep])
+        kb = kb_without(full_kb, subject_of(test))
+        for label, setting in chosen:
+            rng = np.random.default_rng([seed, abs(hash(label)) % (2 ** 31)])
+            miss = punch_gaps(truth.n_frames, truth.n_points, protocol, setting, rng, truth.names)
+            query = truth.replace(positions=np.where(miss[..., None], np.nan, truth.positions))
+            for method in methods:
+                start = time.perf_counter()
+                out = fill(query, method, kb=kb, settings=KnnSettings(k=min(k, kb.size)))
+                seconds = time.perf_counter() - start
+                err = np.linalg.norm(out.positions - truth.positions, axis=2)
+                err = np.where(np.isnan(err), np.inf, err)
+                results.append({
+                    "method": method, "setting": label, "test": Path(test).name,
+                    "rmse_missing_mm": float(1000 * np.sqrt((err[miss] ** 2).mean())),
+                    "rmse_all_mm": float(1000 * np.sqrt((err ** 2).mean())),
+                    "seconds": seconds,
+                })
+                done += 1
+                if progress:
+                    progress(done / total, f"{Path(test).name} {label} {method}")
+    return results
+
+
+def table(results):
+    """Mean RMSE over missing entries (all entries) per setting and method, as text."""
+    methods = list(dict.fromkeys(r["method"] for r in results))
+    settings = list(dict.fromkeys(r["setting"] for r in results))
+    lines = ["setting".ljust(18) + "".join(m.rjust(18) for m in methods)]
+    for s in settings:
+        row = s.ljust(18)
+        for m in methods:
+            sel = [r for r in results if r["setting"] == s and r["method"] == m]
+            miss = np.mean([r["rmse_missing_mm"] for r in sel])
+            allp = np.mean([r["rmse_all_mm"] for r in sel])
+            row += f"{miss:9.1f} ({allp:5.1f})".rjust(18)
+        lines.append(row)
+    lines.append("mm, RMSE over missing entries (over all entries), mean over test trials")
+    return "\n".join(lines)

@@ -1,0 +1,379 @@
+"""The knowledge-base method (``knn``): local PCA of the K nearest poses + energy optimisation.
+
+For every frame that has missing points (METHOD.md, steps 3-6):
+
+1. search the K nearest knowledge-base poses over the points present in that frame;
+2. fit a local PCA to them: mean ``mu_t``, the top components ``W_t`` that capture ``variance``
+   of the neighbours' spread (at most ``max_components``), eigenvalues ``lambda``, and the mean
+   variance left out, ``sigma2_t`` (probabilistic PCA's noise);
+3. the pose is ``mu_t + W_t h_t``; all ``h_t`` are found together by minimising
+
+   ``w_r sum h^2/lambda``                               retrieval prior (Mahalanobis)
+   ``+ w_in sum_present (pose - observed)^2 / sigma2_t``     input term
+   ``+ w_l sum_limbs (length - clip median)^2 / s_l^2``      limb term
+   ``+ w_s sum_missing |sum_j c_j X_{t+j}|^2 / s_s^2``      smoothness (world coordinates)
+
+   first in closed form per frame without the last two terms, then refined jointly over the
+   clip with L-BFGS (one batched energy and gradient, no loop over frames).
+
+Beyond the paper:
+- the model is also evaluated one frame outside each gap (the point is hidden there), and the
+  difference to the observation at both ends is blended linearly across the gap, so a fill meets
+  the observed data without a jump; at clip ends the one known offset is kept;
+- smoothness penalises acceleration by default (the paper's term, ``smoothness="paper"``, pulls
+  each frame towards the previous ones and lags on fast motion);
+- frames with fewer than ``min_present`` points present get the model only from their
+  neighbours in time (linear interpolation of the filled result).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+
+from .errors import GapFillError
+from .kb import match_names
+from .normalize import denormalize, frames_of, normalize, rotation_z
+from .search import KBIndex
+
+#: smoothness kernels: residual_t = sum_j c_j X_{t+j} for j = 0..len-1 (t = first frame)
+KERNELS = {
+    "acceleration": np.array([1.0, -2.0, 1.0]),
+    "paper": np.array([-1.0, -2.0, -3.0, 6.0]) / 6.0,  # X_t - (3X_{t-1} + 2X_{t-2} + X_{t-3})/6
+}
+
+
+@dataclass(frozen=True)
+class KnnSettings:
+    """Settings of the ``knn`` method (defaults: the paper's weights, K = 256)."""
+
+    k: int = 256
+    w_r: float = 0.55
+    w_in: float = 0.9
+    w_l: float = 0.3
+    w_s: float = 0.15
+    variance: float = 0.99
+    max_components: int = 24
+    smoothness: str = "acceleration"
+    #: scales that make the terms unitless: limb length error (m), acceleration (m/s^2)
+    limb_scale: float = 0.01
+    accel_scale: float = 11.0
+    #: lower bound of the model's per-coordinate noise variance (m^2)
+    noise_floor: float = 1e-6
+    min_present: int = 3
+    max_iterations: int = 200
+    batch_frames: int = 256
+    random_state: int = 0
+
+
+def _local_pca(neighbours, settings, rng):
+    """Top principal components of each frame's neighbours (batched subspace iteration).
+
+    neighbours: (t, k, d). Returns mean (t, d), components (t, d, r), eigenvalues (t, r) with
+    unused components' eigenvalues set to 0, and noise variance (t,).
+    """
+    t, k, d = neighbours.shape
+    mean = neighbours.mean(axis=1)
+    a = neighbours - mean[:, None, :]
+    total = (a ** 2).sum(axis=(1, 2)) / max(1, k - 1)
+    r = min(settings.max_components, d, k - 1)
+    q = rng.standard_normal((d, r + 8))
+    at = a.transpose(0, 2, 1)
+    y = at @ (a @ q)
+    for _ in range(2):
+        y = at @ (a @ _orthonormal(y))
+    basis = _orthonormal(y)  # (t, d, r+8)
+    ab = a @ basis  # (t, k, r+8)
+    small = ab.transpose(0, 2, 1) @ ab / max(1, k - 1)
+    lam, vec = np.linalg.eigh(small)
+    lam, vec = lam[:, ::-1][:, :r], vec[:, :, ::-1][:, :, :r]
+    comps = basis @ vec
+    lam = np.clip(lam, 0, None)
+    captured = np.cumsum(lam, axis=1) / np.maximum(total, 1e-30)[:, None]
+    used = np.concatenate([np.ones((t, 1), bool), captured[:, :-1] < settings.variance], axis=1)
+    lam = np.where(used, lam, 0.0)
+    left = np.maximum(total - lam.sum(axis=1), 0) / np.maximum(1, d - used.sum(axis=1))
+    return mean, comps, lam, np.maximum(left, settings.noise_floor)
+
+
+def _orthonormal(y):
+    """Orthonormal columns spanning each (d, r) matrix of the batch (Householder QR)."""
+    return np.linalg.qr(y)[0]
+
+
+class _Problem:
+    """The clip-wide energy over the PCA coefficients of the modelled frames."""
+
+    def __init__(self, frames, obs_norm, model_missing, mean, comps, lam, noise, root, angle,
+                 limbs, lengths, fps, settings, n_frames):
+        self.frames = frames  # modelled frame indices into the clip
+        self.obs = obs_norm  # (m, n, 3) normalised observations (NaN where missing)
+        self.miss = model_missing  # (m, n) bool: points the model provides
+        self.mean, self.comps, self.noise = mean, comps, noise
+        self.used = lam > 0
+        self.inv_lam = np.where(self.used, 1.0 / np.where(self.used, lam, 1.0), 0.0)
+        self.rot = rotation_z(angle[frames])  # normalised -> world
+        self.s = settings
+        self.limbs = limbs
+        self.lengths = lengths
+        self.n_frames = n_frames
+        self.kernel = KERNELS[settings.smoothness]
+        scale = settings.accel_scale / fps ** 2 if settings.smoothness == "acceleration" else \
+            settings.accel_scale / fps
+        self.smooth_scale2 = scale ** 2
+        # world positions of the whole clip with observed values; modelled values are written in
+        self.root = root
+
+    def poses(self, h):
+        return self.mean + (self.comps @ h[..., None])[..., 0]
+
+    def energy(self, flat, world_obs):
+        s = self.s
+        m, n = self.miss.shape
+        h = flat.reshape(m, -1)
+        pose = self.poses(h).reshape(m, n, 3)
+        grad_pose = np.zeros_like(pose)
+        # retrieval prior
+        e = s.w_r * (h ** 2 * self.inv_lam).sum()
+        grad_h = 2 * s.w_r * h * self.inv_lam
+        # input term over present points
+        present = ~self.miss
+        resid = np.where(present[..., None], pose - np.nan_to_num(self.obs), 0.0)
+        e += s.w_in * ((resid ** 2).sum(axis=(1, 2)) / self.noise).sum()
+        grad_pose += 2 * s.w_in * resid / self.noise[:, None, None]
+        # the modelled pose where the model provides points, observations elsewhere
+        full = np.where(self.miss[..., None], pose, np.nan_to_num(self.obs))
+        # limb term on limbs with a modelled end
+        if len(self.limbs) and s.w_l:
+            a, b = self.limbs[:, 0], self.limbs[:, 1]
+            active = self.miss[:, a] | self.miss[:, b]
+            vec = full[:, a] - full[:, b]
+            length = np.linalg.norm(vec, axis=2)
+            err = np.where(active, length - self.lengths, 0.0) / s.limb_scale
+            e += s.w_l * (err ** 2).sum()
+            g = 2 * s.w_l * err / s.limb_scale / np.maximum(length, 1e-9)
+            gv = g[..., None] * vec
+            gfull = np.zeros_like(full)
+            np.add.at(gfull, (slice(None), a), gv)
+            np.add.at(gfull, (slice(None), b), -gv)
+            grad_pose += np.where(self.miss[..., None], gfull, 0.0)
+        # smoothness in world coordinates over the whole clip
+        if s.w_s:
+            world = world_obs.copy()
+            modelled_world = full @ self.rot.transpose(0, 2, 1) + self.root[self.frames][:, None]
+            world[self.frames] = np.where(self.miss[..., None], modelled_world, world[self.frames])
+            taps = len(self.kernel)
+            res = sum(c * world[j:self.n_frames - taps + 1 + j] for j, c in enumerate(self.kernel))
+            # only points modelled somewhere in the window count
+            mod = np.zeros((self.n_frames, n), bool)
+            mod[self.frames] = self.miss
+            win = np.zeros((self.n_frames - taps + 1, n), bool)
+            for j in range(taps):
+                win |= mod[j:self.n_frames - taps + 1 + j]
+            res = np.where(win[..., None], np.nan_to_num(res), 0.0)
+            e += s.w_s * (res ** 2).sum() / self.smooth_scale2
+            gworld = np.zeros_like(world)
+            for j, c in enumerate(self.kernel):
+                gworld[j:self.n_frames - taps + 1 + j] += 2 * s.w_s * c * res / self.smooth_scale2
+            gmod = gworld[self.frames] @ self.rot  # back to the normalised frame
+            grad_pose += np.where(self.miss[..., None], gmod, 0.0)
+        grad_h += (grad_pose.reshape(m, 1, -1) @ self.comps)[:, 0]
+        grad_h *= self.used
+        return e, grad_h.ravel()
+
+    def closed_form(self):
+        """Per-frame minimiser of the prior and input terms alone: (m, r)."""
+        present = np.repeat(~self.miss, 3, axis=1).astype(float)
+        wo = self.comps * present[..., None]
+        lhs = wo.transpose(0, 2, 1) @ wo * (self.s.w_in / self.noise)[:, None, None]
+        lhs += self.s.w_r * np.eye(lhs.shape[1]) * np.where(self.used, self.inv_lam, 1e12)[:, None, :]
+        x = np.nan_to_num(self.obs.reshape(len(self.obs), -1)) - self.mean
+        rhs = ((x * present)[:, None, :] @ wo)[:, 0] * (self.s.w_in / self.noise)[:, None]
+        return np.linalg.solve(lhs, rhs[..., None])[..., 0] * self.used
+
+
+def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=None, report=None):
+    """Fill the gaps of ``motion`` from the knowledge base ``kb``.
+
+    Returns a new :class:`~mocap_gapfill.core.motion.Motion` whose missing samples (of the points
+    the knowledge base knows) are filled and marked in ``filled``; observed samples are kept.
+    """
+    report = report or (lambda message: None)
+    progress = progress or (lambda fraction, message: None)
+    common, lacking = match_names(kb, motion.names)
+    if lacking:
+        report(f"not in the knowledge base, left unfilled: {', '.join(lacking)}")
+    kb_cols = [kb.names.index(n) for n in common]
+    ref_names = kb.reference.to_dict(kb.names)
+    for group in ref_names.values():
+        for name in group:
+            if name not in common:
+                raise GapFillError(f"the knowledge base orients poses by {name!r}, which this "
+                                   "motion does not have")
+    q_index = [motion.names.index(n) for n in common]
+    pos = motion.positions[:, q_index]
+    missing = np.isnan(pos[..., 0])
+    n_frames, n = missing.shape
+    if not missing.any():
+        return motion
+    if not (~missing).any():
+        raise GapFillError("every sample is missing: nothing to fill from")
+    if settings.k > kb.size:
+        raise GapFillError(f"K = {settings.k} is larger than the knowledge base ({kb.size} poses)")
+    from .normalize import Reference
+
+    name_to = {nm: i for i, nm in enumerate(common)}
+    reference = Reference(*(tuple(name_to[x] for x in ref_names[key])
+                            for key in ("root", "left", "right")))
+    index = KBIndex(kb.poses[:, kb_cols])
+    limbs = np.asarray([(name_to[kb.names[a]], name_to[kb.names[b]]) for a, b in kb.limbs
+                        if kb.names[a] in name_to and kb.names[b] in name_to], dtype=np.int64)
+    limbs = limbs.reshape(-1, 2)
+    lengths = _clip_lengths(pos, limbs, index.poses)
+    root, angle = frames_of(pos, reference)
+    cache = {}
+    filled_pos = _fill_pass(pos, missing, root, angle, index, limbs, lengths, motion.fps,
+                            settings, progress, should_cancel, report, cache, 0.0, 0.6)
+    ref_points = list({*reference.root, *reference.left, *reference.right})
+    if missing[:, ref_points].any():
+        # the root or hips were in a gap: normalise again with their filled positions, and
+        # model again the frames whose normalisation changed
+        root2, angle2 = frames_of(filled_pos, reference)
+        cache["changed"] = ((np.abs(root2 - root).max(axis=1) > 1e-4)
+                            | (np.abs(angle2 - angle) > 1e-3))
+        filled_pos = _fill_pass(pos, missing, root2, angle2, index, limbs, lengths, motion.fps,
+                                settings, progress, should_cancel, lambda message: None, cache,
+                                0.6, 1.0)
+    out = motion.positions.copy()
+    out[:, q_index] = filled_pos
+    filled = np.zeros_like(motion.missing)
+    filled[:, q_index] = missing & ~np.isnan(filled_pos[..., 0])
+    if motion.filled is not None:
+        filled |= motion.filled
+    progress(1.0, "done")
+    return motion.replace(positions=out, filled=filled)
+
+
+def _fill_pass(pos, missing, root, angle, index, limbs, lengths, fps, settings, progress,
+               should_cancel, report, cache, p0, p1):
+    """One normalise - search - model - optimise - blend pass; the filled positions.
+
+    ``cache`` keeps the local models of the first pass; a second pass models again only the
+    frames flagged in ``cache["changed"]``.
+    """
+    n_frames, n = missing.shape
+    obs_norm = normalize(pos, root, angle)
+
+    # the model's mask: the gaps, widened by one frame each side (boundary predictions)
+    model = missing.copy()
+    model[1:] |= missing[:-1]
+    model[:-1] |= missing[1:]
+    present_count = (~model).sum(axis=1)
+    thin = present_count < settings.min_present
+    model[thin] = missing[thin]  # too little left: do not widen there
+    empty = (~missing).sum(axis=1) < settings.min_present
+    frames = np.flatnonzero(model.any(axis=1) & ~empty)
+    if empty.any():
+        report(f"{int(empty.sum())} frames have fewer than {settings.min_present} points present: "
+               "filled from the frames around them")
+
+    rng = np.random.default_rng(settings.random_state)
+    m = len(frames)
+    d = 3 * n
+    if "models" in cache:
+        means, comps, lams, noise = cache["models"]
+        todo = np.flatnonzero(cache["changed"][frames])
+    else:
+        means = np.empty((m, d))
+        comps = np.empty((m, d, min(settings.max_components, d, settings.k - 1)))
+        lams = np.empty((m, comps.shape[2]))
+        noise = np.empty(m)
+        cache["models"] = (means, comps, lams, noise)
+        todo = np.arange(m)
+    flat_kb = index.poses.reshape(index.n, -1)
+    for start in range(0, len(todo), settings.batch_frames):
+        if should_cancel and should_cancel():
+            raise KeyboardInterrupt
+        rows = todo[start:start + settings.batch_frames]
+        sel = frames[rows]
+        idx, _ = index.search(obs_norm[sel], ~model[sel], settings.k)
+        neighbours = flat_kb[idx].astype(np.float64)
+        means[rows], comps[rows], lams[rows], noise[rows] = _local_pca(neighbours, settings, rng)
+        progress(p0 + (p1 - p0) * 0.7 * (start + len(sel)) / max(1, len(todo)),
+                 "searching and fitting local models")
+    problem = _Problem(frames, obs_norm[frames], model[frames], means, comps, lams, noise, root,
+                       angle, limbs, lengths, fps, settings, n_frames)
+    h0 = problem.closed_form()
+    world_obs = np.nan_to_num(pos)
+    if settings.max_iterations > 0 and (settings.w_s or settings.w_l):
+        def fun(x):
+            if should_cancel and should_cancel():
+                raise KeyboardInterrupt
+            return problem.energy(x, world_obs)
+
+        result = minimize(fun, h0.ravel(), jac=True, method="L-BFGS-B",
+                          options={"maxiter": settings.max_iterations, "gtol": 1e-6})
+        h = result.x.reshape(h0.shape)
+    else:
+        h = h0
+    progress(p0 + (p1 - p0) * 0.95, "writing the fill")
+    pred_norm = problem.poses(h).reshape(m, n, 3)
+    pred = np.full_like(pos, np.nan)
+    pred[frames] = denormalize(pred_norm, root[frames], angle[frames])
+    filled_pos = _blend_into_gaps(pos, pred, missing, model)
+    if empty.any():
+        filled_pos = _interpolate_frames(filled_pos, empty)
+    return filled_pos
+
+
+def _clip_lengths(pos, limbs, kb_poses):
+    """Median length of each limb over the frames where both ends are present; the knowledge
+    base's median where the clip never shows both ends."""
+    if not len(limbs):
+        return np.zeros(0)
+    a, b = limbs[:, 0], limbs[:, 1]
+    seen = np.linalg.norm(pos[:, a] - pos[:, b], axis=2)
+    clip = np.array([np.median(c[np.isfinite(c)]) if np.isfinite(c).any() else np.nan
+                     for c in seen.T])
+    known = np.median(np.linalg.norm(kb_poses[:, a] - kb_poses[:, b], axis=2), axis=0)
+    return np.where(np.isfinite(clip), clip, known)
+
+
+def _blend_into_gaps(pos, pred, missing, model):
+    """Observed values kept; each gap takes the prediction plus the observation-minus-prediction
+    offset at its two ends, blended linearly (one end at clip ends)."""
+    out = pos.copy()
+    n_frames, n = missing.shape
+    for p in range(n):
+        m = np.concatenate([[False], missing[:, p], [False]]).astype(np.int8)
+        edges = np.flatnonzero(np.diff(m))
+        for a, b in zip(edges[::2], edges[1::2] - 1):
+            seg = pred[a:b + 1, p]
+            if np.isnan(seg).any():
+                continue
+            offsets = []
+            if a > 0 and model[a - 1, p] and np.isfinite(pred[a - 1, p]).all():
+                offsets.append((a - 1, pos[a - 1, p] - pred[a - 1, p]))
+            if b < n_frames - 1 and model[b + 1, p] and np.isfinite(pred[b + 1, p]).all():
+                offsets.append((b + 1, pos[b + 1, p] - pred[b + 1, p]))
+            if len(offsets) == 2:
+                t = (np.arange(a, b + 1) - (a - 1)) / (b + 2 - a)
+                shift = offsets[0][1] * (1 - t)[:, None] + offsets[1][1] * t[:, None]
+            elif offsets:
+                shift = offsets[0][1][None, :]
+            else:
+                shift = 0.0
+            out[a:b + 1, p] = seg + shift
+    return out
+
+
+def _interpolate_frames(pos, frames_mask):
+    """Replace the given frames by linear interpolation in time, per point and coordinate."""
+    out = pos.copy()
+    t = np.arange(len(pos))
+    for p in range(pos.shape[1]):
+        ok = ~frames_mask & np.isfinite(pos[:, p, 0])
+        if ok.any():
+            for c in range(3):
+                out[frames_mask, p, c] = np.interp(t[frames_mask], t[ok], pos[ok, p, c])
+    return out
