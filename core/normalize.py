@@ -39,9 +39,26 @@ class Reference:
     root: tuple
     left: tuple
     right: tuple
+    #: other left/right point pairs that can stand in for the hips' facing (see frames_of)
+    pairs: tuple = ()
 
     def to_dict(self, names):
         return {k: [names[i] for i in getattr(self, k)] for k in ("root", "left", "right")}
+
+
+def mirror_pairs(names):
+    """(left, right) index pairs of points named alike but for a side prefix
+    (``lButtock``/``rButtock``, ``LSHO``/``RSHO``, ``LeftArm``/``RightArm``)."""
+    index = {n: i for i, n in enumerate(names)}
+    pairs = []
+    for name, i in index.items():
+        for left, right in (("Left", "Right"), ("left", "right"), ("L", "R"), ("l", "r")):
+            if name.startswith(left) and len(name) > len(left):
+                other = right + name[len(left):]
+                if other in index:
+                    pairs.append((i, index[other]))
+                break
+    return pairs
 
 
 def find_reference(names):
@@ -53,12 +70,15 @@ def find_reference(names):
 
     for root, left, right in _REFERENCES:
         r, l, rr = idx(root), idx(left), idx(right)
-        if r and l and rr:
-            return Reference(r, l, rr)
-        if r:  # a root without hips: try the shoulders for the facing
+        if r and not (l and rr):  # a root without hips: try the shoulders for the facing
             for sl, sr in _SHOULDERS:
                 if idx(sl) and idx(sr):
-                    return Reference(r, idx(sl), idx(sr))
+                    l, rr = idx(sl), idx(sr)
+                    break
+        if r and l and rr:
+            used = {*r, *l, *rr}
+            pairs = tuple(p for p in mirror_pairs(names) if not used & set(p))
+            return Reference(r, l, rr, pairs)
     raise GapFillError(
         "cannot orient this point set: no known root and left/right hip (or shoulder) points "
         f"among {', '.join(names[:12])}{'...' if len(names) > 12 else ''}")
@@ -78,38 +98,68 @@ def _interpolate_missing(values, valid):
 def frames_of(positions, reference):
     """Per-frame root (frames, 3) and facing angle (frames,) of a motion, robust to gaps.
 
-    Where the reference points are missing, the root and facing are carried rigidly from the
-    nearest frames on either side that have them, using the points present in both (a 2-D
-    Kabsch fit of the turn about Z), and the two estimates are blended across the run; with no
-    usable points they are interpolated in time (held at clip ends).
+    Where the reference points are missing, the root is carried rigidly from the nearest frames
+    on either side that have it (a 2-D Kabsch fit of the points present in both), and the facing
+    follows the present mirror pair (e.g. the buttocks or the shoulders) whose line keeps the
+    steadiest angle to the hip line, with that angle's offset interpolated across the run. With
+    no usable points both are interpolated in time (held at clip ends).
     """
     pos = np.asarray(positions, dtype=np.float64)
     root = pos[:, list(reference.root)].mean(axis=1)
-    hips = pos[:, list(reference.left)].mean(axis=1) - pos[:, list(reference.right)].mean(axis=1)
-    angle = np.arctan2(hips[:, 1], hips[:, 0])
+    angle = _line_angle(pos, reference.left, reference.right)
     known = np.isfinite(root).all(axis=1) & np.isfinite(angle)
     if not known.any():
         raise GapFillError("the root and hip points are missing in every frame: cannot normalise")
-    unwrapped = np.zeros((len(angle), 1))
-    unwrapped[known, 0] = np.unwrap(angle[known])
+    unwrapped = np.zeros(len(angle))
+    unwrapped[known] = np.unwrap(angle[known])
     root = _interpolate_missing(root, known)
-    angle = _interpolate_missing(unwrapped, known)[:, 0]
+    angle = _interpolate_missing(unwrapped[:, None], known)[:, 0]
     edges = np.flatnonzero(np.diff(np.concatenate([[0], (~known).astype(np.int8), [0]])))
+    # steadiness of each mirror pair's angle against the hip line, over the known frames
+    offsets, spread = [], []
+    for left, right in reference.pairs:
+        off = angle - _line_angle(pos, (left,), (right,))
+        ok = known & np.isfinite(off)
+        off = np.where(ok, np.angle(np.exp(1j * off)), np.nan)
+        offsets.append(off)
+        spread.append(np.nanstd(off) if ok.sum() > 1 else np.inf)
     for a, b in zip(edges[::2], edges[1::2]):  # runs [a, b) without the reference points
-        estimates = [e for e in (_carry(pos, root, angle, a - 1, a, b),
-                                 _carry(pos, root, angle, b, a, b)) if e is not None]
+        estimates = [e for e in (_carry(pos, root, a - 1, a, b), _carry(pos, root, b, a, b))
+                     if e is not None]
         if len(estimates) == 2:
             w = ((np.arange(a, b) - (a - 1)) / (b - a + 1))[:, None]
-            (r0, g0), (r1, g1) = estimates
-            root[a:b] = r0 * (1 - w) + r1 * w
-            angle[a:b] = g0 * (1 - w[:, 0]) + g1 * w[:, 0]
+            root[a:b] = estimates[0] * (1 - w) + estimates[1] * w
         elif estimates:
-            root[a:b], angle[a:b] = estimates[0]
+            root[a:b] = estimates[0]
+        for k in np.argsort(spread):
+            left, right = reference.pairs[k]
+            anchors = [t for t in (a - 1, b) if 0 <= t < len(pos) and np.isfinite(offsets[k][t])]
+            pair = _line_angle(pos[a:b], (left,), (right,))
+            if not anchors or not np.isfinite(pair).all() or not np.isfinite(spread[k]):
+                continue
+            off = np.interp(np.arange(a, b), anchors, [offsets[k][t] for t in anchors])
+            estimate = np.unwrap(pair + off)
+            # continue the unwrapped angle of the frame before (or after) the run
+            start = angle[a - 1] if a > 0 else angle[b]
+            angle[a:b] = estimate + 2 * np.pi * np.round((start - estimate[0]) / (2 * np.pi))
+            # the root keeps its offset from the pair's midpoint in the body frame
+            mid = (pos[:, left] + pos[:, right]) / 2
+            body = [rotation_z(-angle[t]) @ (root[t] - mid[t]) for t in anchors]
+            body = np.stack([np.interp(np.arange(a, b), anchors, [o[i] for o in body])
+                             for i in range(3)], axis=1)
+            root[a:b] = mid[a:b] + np.einsum("fij,fj->fi", rotation_z(angle[a:b]), body)
+            break
     return root, angle
 
 
-def _carry(pos, root, angle, anchor, a, b):
-    """Root and angle of frames a..b-1 carried rigidly from the known frame ``anchor``."""
+def _line_angle(pos, left, right):
+    """Angle about Z of the line from the right points' mean to the left points' mean."""
+    line = pos[:, list(left)].mean(axis=1) - pos[:, list(right)].mean(axis=1)
+    return np.arctan2(line[:, 1], line[:, 0])
+
+
+def _carry(pos, root, anchor, a, b):
+    """Root of frames a..b-1 carried rigidly from the known frame ``anchor`` (2-D Kabsch)."""
     if anchor < 0 or anchor >= len(pos):
         return None
     seen = np.isfinite(pos[anchor, :, 0]) & np.isfinite(pos[a:b, :, 0]).all(axis=0)
@@ -122,8 +172,7 @@ def _carry(pos, root, angle, anchor, a, b):
     v = cur[..., :2] - c[:, None, :2]
     turn = np.arctan2((u[:, 0] * v[..., 1] - u[:, 1] * v[..., 0]).sum(axis=1),
                       (u * v).sum(axis=2).sum(axis=1))
-    offset = np.einsum("fij,j->fi", rotation_z(turn), root[anchor] - c0)
-    return c + offset, angle[anchor] + turn
+    return c + np.einsum("fij,j->fi", rotation_z(turn), root[anchor] - c0)
 
 
 def rotation_z(angle):

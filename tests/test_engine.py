@@ -1,0 +1,164 @@
+"""The recovery engine on real data: normalisation, knowledge base, exact search, filling."""
+
+import numpy as np
+import pytest
+
+from mocap_gapfill.core.errors import GapFillError, ParseError
+from mocap_gapfill.core.evaluate import kb_without, punch_gaps, subject_of
+from mocap_gapfill.core.fill import METHODS, fill
+from mocap_gapfill.core.io import read_motion
+from mocap_gapfill.core.kb import build_kb, load_kb, resample
+from mocap_gapfill.core.normalize import find_reference, frames_of, normalize
+from mocap_gapfill.core.recover import KnnSettings
+from mocap_gapfill.core.search import KBIndex, knn_oracle
+
+DAZ = "cmu/bvh/daz_friendly"
+
+
+@pytest.fixture(scope="module")
+def daz_kb(data_dir):
+    """All Daz-friendly BVH of subjects 06-08 at 60 fps (subject 07 is the test subject)."""
+    return build_kb([data_dir / DAZ / s for s in ("06", "07", "08")], fps=60, skip_frames=6)
+
+
+@pytest.fixture(scope="module")
+def walk(data_dir):
+    m = read_motion(data_dir / DAZ / "07/07_05.bvh.gz", skip_frames=6)
+    return m.replace(positions=resample(m.positions, m.fps, 60.0), fps=60.0)
+
+
+def test_normalisation_faces_one_way_and_survives_missing_hips(walk):
+    ref = find_reference(walk.names)
+    root, angle = frames_of(walk.positions, ref)
+    x = normalize(walk.positions, root, angle)
+    hips = x[:, list(ref.left)].mean(axis=1) - x[:, list(ref.right)].mean(axis=1)
+    assert np.abs(x[:, ref.root[0]]).max() < 1e-12
+    assert np.abs(hips[:, 1]).max() < 1e-12 and (hips[:, 0] > 0).all()
+    # hide the root and both hips for 60 frames (1 s) in the middle and at the end of the walk
+    for a, b in [(100, 160), (len(walk.positions) - 60, len(walk.positions))]:
+        gappy = walk.positions.copy()
+        gappy[a:b, [*ref.root, *ref.left, *ref.right]] = np.nan
+        root2, angle2 = frames_of(gappy, ref)
+        assert np.linalg.norm(root2 - root, axis=1).max() < 0.06  # carried rigidly, not held
+        assert np.abs(angle2 - angle).max() < np.deg2rad(10)
+
+
+def test_reference_for_unknown_point_sets():
+    with pytest.raises(GapFillError, match="cannot orient"):
+        find_reference(["a", "b", "c"])
+
+
+def test_knowledge_base_round_trip_and_checks(daz_kb, tmp_path):
+    assert daz_kb.size > 5000 and len(daz_kb.names) == 43 and daz_kb.fps == 60
+    assert daz_kb.poses.dtype == np.float32 and np.isfinite(daz_kb.poses).all()
+    path = daz_kb.save(tmp_path / "kb.npz")
+    back = load_kb(path)
+    np.testing.assert_array_equal(back.poses, daz_kb.poses)
+    assert back.names == daz_kb.names and back.sources == daz_kb.sources
+    with pytest.raises(GapFillError, match="exists"):
+        daz_kb.save(path)
+    (tmp_path / "empty.npz").write_bytes(b"")
+    with pytest.raises(ParseError, match="0 bytes"):
+        load_kb(tmp_path / "empty.npz")
+    # a future format version is refused with a clear message
+    with np.load(path) as npz:
+        arrays = dict(npz)
+    arrays["format_version"] = np.int64(99)
+    np.savez(tmp_path / "future.npz", **arrays)
+    with pytest.raises(ParseError, match="newer"):
+        load_kb(tmp_path / "future.npz")
+    # object arrays would need pickle: never loaded
+    arrays["format_version"] = np.int64(1)
+    arrays["names"] = np.array(list(daz_kb.names), dtype=object)
+    np.savez(tmp_path / "pickled.npz", **arrays)
+    with pytest.raises(ParseError, match="not a knowledge-base file"):
+        load_kb(tmp_path / "pickled.npz")
+
+
+def test_mismatched_knowledge_base_names_what_is_missing(daz_kb, data_dir):
+    markers = read_motion(data_dir / "cmu/c3d/85_02.c3d").frame_range(0, 20)
+    pos = markers.positions.copy()
+    pos[5:10, 3] = np.nan
+    with pytest.raises(GapFillError, match="does not match.*LFWT"):
+        fill(markers.replace(positions=pos), "knn", kb=daz_kb)
+
+
+def test_search_equals_the_exact_oracle(daz_kb):
+    rng = np.random.default_rng(0)
+    picks = rng.choice(daz_kb.size, 120, replace=False)
+    queries = daz_kb.poses[picks] + rng.normal(scale=0.03, size=(120, 43, 3))
+    present = rng.random((120, 43)) > 0.3
+    present[:10] = True
+    present[10:20, :40] = False  # almost nothing present
+    idx, d2 = KBIndex(daz_kb.poses).search(queries, present, 256)
+    ref_idx, ref_d2 = knn_oracle(daz_kb.poses, queries, present, 256)
+    np.testing.assert_allclose(d2, ref_d2, rtol=1e-5, atol=1e-9)
+    # identical neighbours, except where two KB poses are equally far (ties)
+    differ = idx != ref_idx
+    assert np.allclose(d2[differ], ref_d2[differ], rtol=1e-5)
+    assert differ.mean() < 0.01
+    with pytest.raises(GapFillError, match="knowledge-base size"):
+        KBIndex(daz_kb.poses[:100]).search(queries, present, 101)
+
+
+def _gappy(truth, miss):
+    return truth.replace(positions=np.where(miss[..., None], np.nan, truth.positions))
+
+
+def _rmse_mm(out, truth, miss):
+    err = np.linalg.norm(out.positions - truth.positions, axis=2)
+    return 1000 * np.sqrt((err[miss] ** 2).mean())
+
+
+def test_knn_beats_every_baseline_and_keeps_observations(daz_kb, walk):
+    kb = kb_without(daz_kb, subject_of("07_05"))
+    assert not any(subject_of(s) == "07" for s in np.array(kb.sources)[np.unique(kb.source_index)])
+    miss = punch_gaps(walk.n_frames, walk.n_points, "joints", (6, 60), np.random.default_rng(3))
+    query = _gappy(walk, miss)
+    scores = {m: _rmse_mm(fill(query, m, kb=kb), walk, miss) for m in METHODS}
+    best_baseline = min(v for m, v in scores.items() if m != "knn")
+    assert scores["knn"] < best_baseline, scores
+    out = fill(query, "knn", kb=kb)
+    observed = ~miss
+    np.testing.assert_array_equal(out.positions[observed], walk.positions[observed])
+    np.testing.assert_array_equal(out.filled, miss)
+    assert not out.missing.any()
+
+
+def test_fill_meets_the_data_at_both_ends_of_a_gap(daz_kb, walk):
+    kb = kb_without(daz_kb, "07")
+    hand = walk.names.index("lHand")
+    miss = np.zeros(walk.missing.shape, dtype=bool)
+    miss[80:140, hand] = True
+    out = fill(_gappy(walk, miss), "knn", kb=kb).positions[:, hand]
+    step = np.linalg.norm(np.diff(walk.positions[:, hand], axis=0), axis=1)
+    jumps = np.linalg.norm(out[[80, 140]] - out[[79, 139]], axis=1)
+    assert (jumps < 3 * step.max()).all()  # no jump where the fill meets the observed data
+
+
+def test_gaps_at_clip_ends_and_frames_with_nothing_present(daz_kb, walk):
+    kb = kb_without(daz_kb, "07")
+    miss = np.zeros(walk.missing.shape, dtype=bool)
+    miss[:40, walk.names.index("rFoot")] = True  # touches the first frame
+    miss[-40:, walk.names.index("lHand")] = True  # touches the last frame
+    miss[150:153] = True  # three frames with nothing at all
+    out = fill(_gappy(walk, miss), "knn", kb=kb)
+    assert not out.missing.any()
+    assert _rmse_mm(out, walk, miss) < 120
+    blank = out.positions[150:153]
+    lo, hi = out.positions[149], out.positions[153]
+    assert np.all((blank >= np.minimum(lo, hi) - 1e-9) & (blank <= np.maximum(lo, hi) + 1e-9))
+
+
+def test_k_larger_than_the_knowledge_base(daz_kb, walk):
+    miss = np.zeros(walk.missing.shape, dtype=bool)
+    miss[10:20, 5] = True
+    with pytest.raises(GapFillError, match="larger than the knowledge base"):
+        fill(_gappy(walk, miss), "knn", kb=daz_kb, settings=KnnSettings(k=daz_kb.size + 1))
+
+
+def test_unknown_method():
+    from mocap_gapfill.core.motion import Motion
+
+    with pytest.raises(GapFillError, match="unknown method"):
+        fill(Motion(np.full((2, 1, 3), np.nan), ("A",), 30.0), "magic")
