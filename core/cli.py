@@ -180,7 +180,8 @@ def cmd_evaluate(args):
     progress = Progress(args.quiet)
     results = evaluate(args.protocol, args.test, args.kb_sources, methods=methods, fps=args.fps,
                        seed=args.seed, k=args.k, skip_frames=args.skip_frames,
-                       settings=args.settings, progress=progress, report=_report)
+                       settings=args.settings, exclude=args.exclude_kb or (),
+                       progress=progress, report=_report)
     progress.done()
     print(table(results))
     if args.json:
@@ -189,6 +190,16 @@ def cmd_evaluate(args):
                    "kb_sources": [str(s) for s in args.kb_sources], "results": results}
         Path(args.json).write_text(json.dumps(payload, indent=1))
         print(f"wrote {args.json}")
+    return 0
+
+
+def cmd_demo(args):
+    from .demo import run_demo
+
+    progress = Progress(args.quiet)
+    run_demo(args.outdir, data=args.data, progress=progress,
+             report=lambda m: (progress.done(), print(m)))
+    progress.done()
     return 0
 
 
@@ -253,9 +264,17 @@ def build_parser():
     p.add_argument("-K", dest="k", type=int, default=256)
     p.add_argument("--skip-frames", type=int, default=0, metavar="N",
                    help="drop N leading frames of every file (6 for Daz-friendly BVH)")
+    p.add_argument("--exclude-kb", action="append", metavar="GLOB",
+                   help="leave matching files out of the knowledge base (repeatable)")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("demo", help="fill a real take with gaps and show accuracy on known truth")
+    p.add_argument("outdir", nargs="?", default="out", help="where to write (default: out)")
+    p.add_argument("--data", help="the shared data folder (default: ../shared/data)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(func=cmd_demo)
     return parser
 
 

@@ -109,10 +109,11 @@ def kb_without(kb, subject):
 
 
 def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=256,
-             skip_frames=0, settings=None, progress=None, report=None):
+             skip_frames=0, settings=None, exclude=(), progress=None, report=None):
     """Run a protocol; a list of result dicts (method, setting, test, rmse_missing_mm, ...)."""
     report = report or (lambda message: None)
-    full_kb = build_kb(kb_sources, fps=fps, skip_frames=skip_frames, report=report)
+    full_kb = build_kb(kb_sources, fps=fps, skip_frames=skip_frames, exclude=exclude,
+                       report=report)
     results = []
     chosen = settings_of(protocol) if settings is None else [
         s for s in settings_of(protocol) if s[0] in settings]
@@ -131,7 +132,7 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=2
             truth = truth.replace(positions=truth.positions[keep])
         kb = kb_without(full_kb, subject_of(test))
         for label, setting in chosen:
-            rng = np.random.default_rng([seed, abs(hash(label)) % (2 ** 31)])
+            rng = np.random.default_rng([seed, *label.encode()])
             miss = punch_gaps(truth.n_frames, truth.n_points, protocol, setting, rng, truth.names)
             query = truth.replace(positions=np.where(miss[..., None], np.nan, truth.positions))
             for method in methods:

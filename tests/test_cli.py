@@ -1,6 +1,7 @@
 """The mocap-gapfill command line, run as a user would (python -m mocap_gapfill)."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -66,3 +67,85 @@ def test_console_script_is_installed():
     assert exe, "pip install -e . provides the mocap-gapfill command"
     r = subprocess.run([exe, "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "info" in r.stdout and "convert" in r.stdout
+
+
+def test_kb_build_then_fill(data_dir, tmp_path):
+    kb = tmp_path / "kb.npz"
+    r = cli("kb", "build", data_dir / "cmu/c3d/85_02.c3d", data_dir / "cmu/c3d/135_02.c3d",
+            "-o", kb, "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "6012 poses of 41 points at 120 fps from 2 files" in r.stdout
+    r = cli("kb", "build", data_dir / "cmu/c3d/85_02.c3d", "-o", kb, "--quiet")
+    assert r.returncode == 2 and "exists" in r.stderr  # never replaced silently
+    src = data_dir / "cmu/c3d/01_01.c3d"
+    out = tmp_path / "filled.c3d"
+    r = cli("fill", src, "-k", kb, "-o", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "filled 30 samples with knn" in r.stdout
+    assert "RBAC-1" in r.stderr  # the extra marker the KB does not know is reported
+    before, after = read_motion(src), read_motion(out)
+    assert after.missing.sum() == before.missing.sum() - 30
+    observed = ~before.missing
+    np.testing.assert_allclose(after.positions[observed], before.positions[observed], atol=1e-6)
+    # --max-gap leaves longer gaps alone: RBAC's gap is 30 frames
+    r = cli("fill", src, "-k", kb, "-o", tmp_path / "short.npz", "--max-gap", "20", "--quiet")
+    assert r.returncode == 0 and "filled 0 samples" in r.stdout
+    r = cli("fill", src, "-o", tmp_path / "x.npz", "--method", "pca")
+    assert r.returncode == 2 and "needs a knowledge base" in r.stderr
+
+
+def test_evaluate_writes_json(data_dir, tmp_path):
+    out = tmp_path / "eval.json"
+    r = cli("evaluate", "--protocol", "markers", "--settings", "rate=0.1", "--fps", "120",
+            "--methods", "knn", "linear", "--test", data_dir / "cmu/c3d/85_02.c3d",
+            "--kb-sources", data_dir / "cmu/c3d", "--json", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    payload = json.loads(out.read_text())
+    assert payload["protocol"] == "markers"
+    rows = payload["results"]
+    assert {(row["method"], row["setting"], row["test"]) for row in rows} == {
+        ("knn", "rate=0.1", "85_02.c3d"), ("linear", "rate=0.1", "85_02.c3d")}
+    for row in rows:
+        assert row["rmse_missing_mm"] > row["rmse_all_mm"] > 0 and row["seconds"] > 0
+    assert "rate=0.1" in r.stdout
+
+
+def test_ctrl_c_stops_cleanly_and_writes_nothing(data_dir, tmp_path):
+    import signal
+    import time
+
+    from mocap_gapfill.core.evaluate import punch_gaps
+    from mocap_gapfill.core.io import write_motion
+
+    kb = tmp_path / "kb.npz"
+    assert cli("kb", "build", data_dir / "cmu/bvh/daz_friendly/08", "-o", kb, "--skip-frames",
+               "6", "--quiet").returncode == 0
+    take = read_motion(data_dir / "cmu/bvh/daz_friendly/13/13_30.bvh.gz", skip_frames=6)
+    miss = punch_gaps(take.n_frames, take.n_points, "joints", (6, 120), np.random.default_rng(0))
+    gappy = write_motion(take.replace(positions=np.where(miss[..., None], np.nan, take.positions)),
+                         tmp_path / "gappy.npz")
+    out = tmp_path / "filled.npz"
+    proc = subprocess.Popen([sys.executable, "-m", "mocap_gapfill", "fill", str(gappy), "-k",
+                             str(kb), "-o", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(2.0)
+    assert proc.poll() is None, "the fill ended before it could be interrupted"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "interrupted: nothing was written" in err and "Traceback" not in err
+    assert not out.exists() and not list(tmp_path.glob(".filled*"))
+
+
+def test_demo_is_the_main_job(data_dir, tmp_path):
+    r = subprocess.run([sys.executable, "-m", "mocap_gapfill", "demo", str(tmp_path), "--quiet",
+                        "--data", str(data_dir)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "filled 30 samples" in r.stdout
+    scores = dict(re.findall(r"^\s+(\w+)\s+RMSE over missing markers\s+([\d.]+) mm", r.stdout,
+                             re.M))
+    assert set(scores) == {"knn", "linear", "spline", "pca", "intercorrelation"}
+    assert float(scores["knn"]) < min(float(v) for k, v in scores.items() if k != "knn")
+    filled = read_motion(tmp_path / "01_01_filled.c3d")
+    assert filled.missing.sum() == read_motion(data_dir / "cmu/c3d/01_01.c3d").missing.sum() - 30
+    assert read_motion(tmp_path / "85_02_punched_filled.c3d").n_frames == 810

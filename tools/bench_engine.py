@@ -1,0 +1,129 @@
+"""Engine benchmark: prints medians and ratios (not a test). Needs ../shared/data.
+
+1. Exact masked search: 2,048 query frames, 65,536-pose knowledge base, K = 256, our blocked
+   GEMM search beside scipy's cKDTree on the same data (one mask for all queries, so cKDTree gets
+   one tree over the present coordinates; its build time is reported apart).
+2. Fill of a 2,048-frame clip (6 joints missing in every 120-frame interval) against a knowledge
+   base of all Daz-friendly BVH motion (120 fps, the clip's subject left out): seconds and peak
+   memory (max RSS of a fresh process for the stage).
+
+Usage: OMP_NUM_THREADS=2 .venv/bin/python tools/bench_engine.py [--repeat 3] [--json OUT]
+"""
+
+import argparse
+import json
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA", Path(__file__).resolve().parents[2] / "shared/data"))
+DAZ = DATA / "cmu/bvh/daz_friendly"
+
+
+def stage_search(repeat):
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    from mocap_gapfill.core.kb import build_kb
+    from mocap_gapfill.core.search import KBIndex
+
+    kb = build_kb([DAZ], skip_frames=6, exclude=["*/13/*"])
+    rng = np.random.default_rng(0)
+    poses = kb.poses[rng.choice(kb.size, 65536, replace=False)]
+    take = build_kb([DAZ / "13/13_30.bvh.gz"], skip_frames=6)  # normalised test poses
+    queries = take.poses[:2048].astype(np.float64)
+    present = np.ones((2048, poses.shape[1]), bool)
+    present[:, rng.choice(poses.shape[1], 6, replace=False)] = False
+    index = KBIndex(poses)
+    ours = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        index.search(queries, present, 256)
+        ours.append(time.perf_counter() - t)
+    cols = np.repeat(present[0], 3)
+    data = poses.reshape(len(poses), -1)[:, cols].astype(np.float64)
+    t = time.perf_counter()
+    tree = cKDTree(data)
+    build = time.perf_counter() - t
+    kd = []
+    for _ in range(max(1, repeat // 2)):
+        t = time.perf_counter()
+        tree.query(queries.reshape(2048, -1)[:, cols], k=256, workers=-1)
+        kd.append(time.perf_counter() - t)
+    return {"kb_size": len(poses), "queries": 2048, "k": 256, "dims": int(cols.sum()),
+            "ours_median_s": statistics.median(ours), "ckdtree_query_median_s": statistics.median(kd),
+            "ckdtree_build_s": build,
+            "speedup_vs_ckdtree": statistics.median(kd) / statistics.median(ours)}
+
+
+def stage_fill(repeat):
+    import numpy as np
+
+    from mocap_gapfill.core.evaluate import punch_gaps
+    from mocap_gapfill.core.fill import fill
+    from mocap_gapfill.core.io import read_motion
+    from mocap_gapfill.core.kb import build_kb
+
+    t = time.perf_counter()
+    kb = build_kb([DAZ], skip_frames=6, exclude=["*/13/*"])
+    build = time.perf_counter() - t
+    take = read_motion(DAZ / "13/13_30.bvh.gz", skip_frames=6).frame_range(0, 2048)
+    miss = punch_gaps(2048, take.n_points, "joints", (6, 120), np.random.default_rng(0))
+    query = take.replace(positions=np.where(miss[..., None], np.nan, take.positions))
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fill(query, "knn", kb=kb)
+        times.append(time.perf_counter() - t)
+    err = np.linalg.norm(out.positions - take.positions, axis=2)[miss]
+    return {"kb_size": kb.size, "frames": 2048, "fps": take.fps, "k": 256,
+            "kb_build_s": build, "fill_median_s": statistics.median(times),
+            "rmse_missing_mm": float(1000 * np.sqrt((err ** 2).mean()))}
+
+
+def run_stage(name, repeat):
+    """Run one stage in a fresh interpreter; its result plus that process's peak RSS."""
+    proc = subprocess.run([sys.executable, __file__, "--stage", name, "--repeat", str(repeat)],
+                          capture_output=True, text=True)
+    if proc.returncode:
+        sys.exit(proc.stderr)
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--stage", choices=["search", "fill"])
+    parser.add_argument("--json")
+    args = parser.parse_args()
+    if args.stage:
+        result = {"search": stage_search, "fill": stage_fill}[args.stage](args.repeat)
+        result["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        print(json.dumps(result))
+        return
+    machine = {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+               "threads": os.environ.get("OMP_NUM_THREADS"), "python": platform.python_version()}
+    search = run_stage("search", args.repeat)
+    print(f"search: {search['queries']} queries x {search['kb_size']} poses, K={search['k']}, "
+          f"{search['dims']} dims")
+    print(f"  ours (exact, blocked GEMM)  median {1000 * search['ours_median_s']:8.0f} ms")
+    print(f"  scipy cKDTree query         median {1000 * search['ckdtree_query_median_s']:8.0f} ms"
+          f"  (+ build {1000 * search['ckdtree_build_s']:.0f} ms)")
+    print(f"  speed-up over cKDTree       {search['speedup_vs_ckdtree']:8.1f} x")
+    fill = run_stage("fill", args.repeat)
+    print(f"fill: {fill['frames']} frames at {fill['fps']:g} fps, 6 joints missing per 120-frame "
+          f"interval, KB {fill['kb_size']} poses (built in {fill['kb_build_s']:.1f} s)")
+    print(f"  knn fill                    median {fill['fill_median_s']:8.2f} s, "
+          f"peak RSS {fill['peak_rss_mb']:.0f} MB, RMSE missing {fill['rmse_missing_mm']:.1f} mm")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"machine": machine, "search": search,
+                                               "fill": fill}, indent=1))
+
+
+if __name__ == "__main__":
+    main()

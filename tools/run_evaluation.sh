@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# The documented accuracy runs (docs/EVALUATION.md). Needs ../shared/data; takes tens of minutes
+# on 2 cores. Writes docs/results/*.json and prints the tables.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+D=${MOCAP_GAPFILL_DATA:-../shared/data}
+MG=".venv/bin/mocap-gapfill"
+mkdir -p docs/results
+export OMP_NUM_THREADS=2
+DAZ="$D/cmu/bvh/daz_friendly"
+$MG evaluate --protocol joints --quiet --skip-frames 6 --kb-sources "$DAZ" \
+  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
+         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
+         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --json docs/results/joints_bvh43.json
+AMC="$D/cmu/asfamc"
+$MG evaluate --protocol joints --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
+  --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
+  --json docs/results/joints_amc31.json
+$MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
+  --test "$D/cmu/c3d/85_02.c3d" --json docs/results/markers_cmu_kb.json
+# HDM05-derived numbers (CC BY-SA 3.0 data in the knowledge base)
+$MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
+  --test "$D/cmu/c3d/85_02.c3d" --json docs/results/markers_hdm05_kb.json
+$MG evaluate --protocol bodyparts --quiet --skip-frames 6 --kb-sources "$DAZ" \
+  --test "$DAZ"/05/05_02.bvh.gz "$DAZ"/13/13_30.bvh.gz "$DAZ"/09/09_12.bvh.gz \
+  --json docs/results/bodyparts_bvh43.json
