@@ -43,13 +43,8 @@ def fill(motion, method="knn", kb=None, settings=None, progress=None, should_can
         common, _ = match_names(kb, motion.names)
         sub = motion.select(common)
         kb_cols = [kb.names.index(n) for n in common]
-        ref = kb.reference
-        name_to = {n: i for i, n in enumerate(common)}
-        from .normalize import Reference
-
-        reference = Reference(*(tuple(name_to[kb.names[i]] for i in getattr(ref, key))
-                                for key in ("root", "left", "right")))
-        done = baselines.fill_global_pca(sub.positions, kb.poses[:, kb_cols], reference)
+        done = baselines.fill_global_pca(sub.positions, kb.poses[:, kb_cols],
+                                         kb.reference_for(common))
         index = [motion.names.index(n) for n in common]
     else:
         func = {"linear": baselines.fill_linear, "spline": baselines.fill_spline,

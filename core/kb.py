@@ -53,6 +53,19 @@ class KnowledgeBase:
     def reference(self):
         return find_reference(self.names)
 
+    def reference_for(self, names):
+        """The :class:`Reference` of a query's point set, which must orient poses by the same
+        points as this knowledge base (raises :class:`GapFillError` naming them otherwise)."""
+        mine = self.reference.to_dict(self.names)
+        lacking = [n for group in mine.values() for n in group if n not in names]
+        if lacking:
+            raise GapFillError(f"the knowledge base orients poses by {', '.join(lacking)}, which "
+                               "this motion does not have")
+        theirs = find_reference(list(names))
+        if theirs.to_dict(list(names)) != mine:
+            raise GapFillError("the motion and the knowledge base orient poses by different points")
+        return theirs
+
     def summary(self):
         return {"poses": self.size, "points": len(self.names), "fps": self.fps,
                 "sources": len(self.sources), "names": list(self.names)}

@@ -204,12 +204,7 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
     if lacking:
         report(f"not in the knowledge base, left unfilled: {', '.join(lacking)}")
     kb_cols = [kb.names.index(n) for n in common]
-    ref_names = kb.reference.to_dict(kb.names)
-    for group in ref_names.values():
-        for name in group:
-            if name not in common:
-                raise GapFillError(f"the knowledge base orients poses by {name!r}, which this "
-                                   "motion does not have")
+    reference = kb.reference_for(common)
     q_index = [motion.names.index(n) for n in common]
     pos = motion.positions[:, q_index]
     missing = np.isnan(pos[..., 0])
@@ -220,11 +215,7 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
         raise GapFillError("every sample is missing: nothing to fill from")
     if settings.k > kb.size:
         raise GapFillError(f"K = {settings.k} is larger than the knowledge base ({kb.size} poses)")
-    from .normalize import Reference
-
     name_to = {nm: i for i, nm in enumerate(common)}
-    reference = Reference(*(tuple(name_to[x] for x in ref_names[key])
-                            for key in ("root", "left", "right")))
     index = KBIndex(kb.poses[:, kb_cols])
     limbs = np.asarray([(name_to[kb.names[a]], name_to[kb.names[b]]) for a, b in kb.limbs
                         if kb.names[a] in name_to and kb.names[b] in name_to], dtype=np.int64)

@@ -162,3 +162,15 @@ def test_unknown_method():
 
     with pytest.raises(GapFillError, match="unknown method"):
         fill(Motion(np.full((2, 1, 3), np.nan), ("A",), 30.0), "magic")
+
+
+def test_hips_hidden_at_the_clip_end(daz_kb, walk):
+    """The points that orient every pose are themselves in a gap that runs to the last frame."""
+    kb = kb_without(daz_kb, "07")
+    ref = kb.reference_for(walk.names)
+    miss = np.zeros(walk.missing.shape, dtype=bool)
+    miss[-60:, [*ref.root, *ref.left, *ref.right, walk.names.index("lHand")]] = True
+    query = _gappy(walk, miss)
+    knn = _rmse_mm(fill(query, "knn", kb=kb), walk, miss)
+    linear = _rmse_mm(fill(query, "linear"), walk, miss)
+    assert knn < 40 and knn < linear / 5, (knn, linear)
