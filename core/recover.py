@@ -61,7 +61,7 @@ class KnnSettings:
     #: lower bound of the model's per-coordinate noise variance (m^2)
     noise_floor: float = 1e-6
     min_present: int = 3
-    max_iterations: int = 200
+    max_iterations: int = 30
     batch_frames: int = 256
     random_state: int = 0
 
@@ -69,22 +69,21 @@ class KnnSettings:
 def _local_pca(neighbours, settings, rng):
     """Top principal components of each frame's neighbours (batched subspace iteration).
 
-    neighbours: (t, k, d). Returns mean (t, d), components (t, d, r), eigenvalues (t, r) with
-    unused components' eigenvalues set to 0, and noise variance (t,).
+    neighbours: (t, k, d), float32 or float64. Returns mean (t, d), components (t, d, r) with
+    the eigenvalues (t, r) of unused components set to 0, and the noise variance (t,): the mean
+    variance the used components leave out (probabilistic PCA).
     """
     t, k, d = neighbours.shape
-    mean = neighbours.mean(axis=1)
-    a = neighbours - mean[:, None, :]
-    total = (a ** 2).sum(axis=(1, 2)) / max(1, k - 1)
+    mean = neighbours.mean(axis=1, dtype=np.float64)
+    a = neighbours - mean[:, None, :].astype(neighbours.dtype)
+    cov = (a.transpose(0, 2, 1) @ a).astype(np.float64) / max(1, k - 1)
+    total = np.trace(cov, axis1=1, axis2=2)
     r = min(settings.max_components, d, k - 1)
-    q = rng.standard_normal((d, r + 8))
-    at = a.transpose(0, 2, 1)
-    y = at @ (a @ q)
+    y = cov @ rng.standard_normal((d, min(d, r + 8)))
     for _ in range(2):
-        y = at @ (a @ _orthonormal(y))
+        y = cov @ _orthonormal(y)
     basis = _orthonormal(y)  # (t, d, r+8)
-    ab = a @ basis  # (t, k, r+8)
-    small = ab.transpose(0, 2, 1) @ ab / max(1, k - 1)
+    small = basis.transpose(0, 2, 1) @ cov @ basis
     lam, vec = np.linalg.eigh(small)
     lam, vec = lam[:, ::-1][:, :r], vec[:, :, ::-1][:, :, :r]
     comps = basis @ vec
@@ -105,78 +104,79 @@ class _Problem:
     """The clip-wide energy over the PCA coefficients of the modelled frames."""
 
     def __init__(self, frames, obs_norm, model_missing, mean, comps, lam, noise, root, angle,
-                 limbs, lengths, fps, settings, n_frames):
+                 limbs, lengths, fps, settings, world_obs):
+        m, n = model_missing.shape
         self.frames = frames  # modelled frame indices into the clip
-        self.obs = obs_norm  # (m, n, 3) normalised observations (NaN where missing)
         self.miss = model_missing  # (m, n) bool: points the model provides
+        self.miss3 = model_missing[..., None]
+        self.present3 = ~self.miss3
+        self.obs = np.nan_to_num(obs_norm)  # (m, n, 3) normalised observations, 0 where missing
         self.mean, self.comps, self.noise = mean, comps, noise
         self.used = lam > 0
         self.inv_lam = np.where(self.used, 1.0 / np.where(self.used, lam, 1.0), 0.0)
-        self.rot = rotation_z(angle[frames])  # normalised -> world
+        self.rot = rotation_z(angle[frames])  # normalised -> world, (m, 3, 3)
+        self.rot_t = self.rot.transpose(0, 2, 1)
+        self.root = root[frames][:, None, :]
         self.s = settings
-        self.limbs = limbs
         self.lengths = lengths
-        self.n_frames = n_frames
+        # limbs with a modelled end, as a signed incidence matrix (limbs, points)
+        self.limbs = limbs
+        self.incidence = np.zeros((len(limbs), n))
+        if len(limbs):
+            self.incidence[np.arange(len(limbs)), limbs[:, 0]] = 1.0
+            self.incidence[np.arange(len(limbs)), limbs[:, 1]] = -1.0
+            self.limb_active = self.miss[:, limbs[:, 0]] | self.miss[:, limbs[:, 1]]
+        self.world = world_obs.copy()  # the clip in world coordinates; modelled values go in
         self.kernel = KERNELS[settings.smoothness]
-        scale = settings.accel_scale / fps ** 2 if settings.smoothness == "acceleration" else \
-            settings.accel_scale / fps
-        self.smooth_scale2 = scale ** 2
-        # world positions of the whole clip with observed values; modelled values are written in
-        self.root = root
+        taps = len(self.kernel)
+        span = len(world_obs) - taps + 1
+        scale = settings.accel_scale / fps ** (2 if settings.smoothness == "acceleration" else 1)
+        self.smooth_weight = settings.w_s / scale ** 2
+        # smoothness counts only windows that touch a modelled point
+        modelled = np.zeros(world_obs.shape[:2], bool)
+        modelled[frames] = self.miss
+        window = np.zeros((max(span, 0), n), bool)
+        for j in range(taps):
+            window |= modelled[j:j + span]
+        self.window3 = window[..., None]
+        self.span = span
 
     def poses(self, h):
         return self.mean + (self.comps @ h[..., None])[..., 0]
 
-    def energy(self, flat, world_obs):
+    def energy(self, flat):
         s = self.s
         m, n = self.miss.shape
         h = flat.reshape(m, -1)
         pose = self.poses(h).reshape(m, n, 3)
-        grad_pose = np.zeros_like(pose)
         # retrieval prior
-        e = s.w_r * (h ** 2 * self.inv_lam).sum()
+        e = s.w_r * (h * h * self.inv_lam).sum()
         grad_h = 2 * s.w_r * h * self.inv_lam
         # input term over present points
-        present = ~self.miss
-        resid = np.where(present[..., None], pose - np.nan_to_num(self.obs), 0.0)
-        e += s.w_in * ((resid ** 2).sum(axis=(1, 2)) / self.noise).sum()
-        grad_pose += 2 * s.w_in * resid / self.noise[:, None, None]
+        resid = (pose - self.obs) * self.present3
+        scale = s.w_in / self.noise[:, None, None]
+        e += (resid * resid * scale).sum()
+        grad_pose = 2 * resid * scale
         # the modelled pose where the model provides points, observations elsewhere
-        full = np.where(self.miss[..., None], pose, np.nan_to_num(self.obs))
-        # limb term on limbs with a modelled end
+        full = np.where(self.miss3, pose, self.obs)
         if len(self.limbs) and s.w_l:
-            a, b = self.limbs[:, 0], self.limbs[:, 1]
-            active = self.miss[:, a] | self.miss[:, b]
-            vec = full[:, a] - full[:, b]
-            length = np.linalg.norm(vec, axis=2)
-            err = np.where(active, length - self.lengths, 0.0) / s.limb_scale
-            e += s.w_l * (err ** 2).sum()
-            g = 2 * s.w_l * err / s.limb_scale / np.maximum(length, 1e-9)
-            gv = g[..., None] * vec
-            gfull = np.zeros_like(full)
-            np.add.at(gfull, (slice(None), a), gv)
-            np.add.at(gfull, (slice(None), b), -gv)
-            grad_pose += np.where(self.miss[..., None], gfull, 0.0)
-        # smoothness in world coordinates over the whole clip
-        if s.w_s:
-            world = world_obs.copy()
-            modelled_world = full @ self.rot.transpose(0, 2, 1) + self.root[self.frames][:, None]
-            world[self.frames] = np.where(self.miss[..., None], modelled_world, world[self.frames])
-            taps = len(self.kernel)
-            res = sum(c * world[j:self.n_frames - taps + 1 + j] for j, c in enumerate(self.kernel))
-            # only points modelled somewhere in the window count
-            mod = np.zeros((self.n_frames, n), bool)
-            mod[self.frames] = self.miss
-            win = np.zeros((self.n_frames - taps + 1, n), bool)
-            for j in range(taps):
-                win |= mod[j:self.n_frames - taps + 1 + j]
-            res = np.where(win[..., None], np.nan_to_num(res), 0.0)
-            e += s.w_s * (res ** 2).sum() / self.smooth_scale2
+            vec = _apply_points(self.incidence, full)
+            length = np.sqrt((vec * vec).sum(axis=2))
+            err = np.where(self.limb_active, length - self.lengths, 0.0) / s.limb_scale
+            e += s.w_l * (err * err).sum()
+            g = (2 * s.w_l / s.limb_scale) * err / np.maximum(length, 1e-9)
+            grad_pose += _apply_points(self.incidence.T, g[..., None] * vec) * self.miss3
+        if s.w_s and self.span > 0:
+            world = self.world
+            world[self.frames] = np.where(self.miss3, full @ self.rot_t + self.root,
+                                          world[self.frames])
+            res = sum(c * world[j:j + self.span] for j, c in enumerate(self.kernel))
+            res *= self.window3
+            e += self.smooth_weight * (res * res).sum()
             gworld = np.zeros_like(world)
             for j, c in enumerate(self.kernel):
-                gworld[j:self.n_frames - taps + 1 + j] += 2 * s.w_s * c * res / self.smooth_scale2
-            gmod = gworld[self.frames] @ self.rot  # back to the normalised frame
-            grad_pose += np.where(self.miss[..., None], gmod, 0.0)
+                gworld[j:j + self.span] += (2 * self.smooth_weight * c) * res
+            grad_pose += (gworld[self.frames] @ self.rot) * self.miss3
         grad_h += (grad_pose.reshape(m, 1, -1) @ self.comps)[:, 0]
         grad_h *= self.used
         return e, grad_h.ravel()
@@ -187,9 +187,16 @@ class _Problem:
         wo = self.comps * present[..., None]
         lhs = wo.transpose(0, 2, 1) @ wo * (self.s.w_in / self.noise)[:, None, None]
         lhs += self.s.w_r * np.eye(lhs.shape[1]) * np.where(self.used, self.inv_lam, 1e12)[:, None, :]
-        x = np.nan_to_num(self.obs.reshape(len(self.obs), -1)) - self.mean
+        x = self.obs.reshape(len(self.obs), -1) - self.mean
         rhs = ((x * present)[:, None, :] @ wo)[:, 0] * (self.s.w_in / self.noise)[:, None]
         return np.linalg.solve(lhs, rhs[..., None])[..., 0] * self.used
+
+
+def _apply_points(matrix, x):
+    """``matrix @ x[t]`` for every frame t of x (frames, points, 3), as one 2-D GEMM."""
+    t, n, c = x.shape
+    out = matrix @ x.transpose(1, 0, 2).reshape(n, t * c)
+    return out.reshape(len(matrix), t, c).transpose(1, 0, 2)
 
 
 def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=None, report=None):
@@ -288,19 +295,18 @@ def _fill_pass(pos, missing, root, angle, index, limbs, lengths, fps, settings, 
         rows = todo[start:start + settings.batch_frames]
         sel = frames[rows]
         idx, _ = index.search(obs_norm[sel], ~model[sel], settings.k)
-        neighbours = flat_kb[idx].astype(np.float64)
+        neighbours = flat_kb[idx]  # float32: the covariance is summed in float32, then float64
         means[rows], comps[rows], lams[rows], noise[rows] = _local_pca(neighbours, settings, rng)
         progress(p0 + (p1 - p0) * 0.7 * (start + len(sel)) / max(1, len(todo)),
                  "searching and fitting local models")
     problem = _Problem(frames, obs_norm[frames], model[frames], means, comps, lams, noise, root,
-                       angle, limbs, lengths, fps, settings, n_frames)
+                       angle, limbs, lengths, fps, settings, np.nan_to_num(pos))
     h0 = problem.closed_form()
-    world_obs = np.nan_to_num(pos)
     if settings.max_iterations > 0 and (settings.w_s or settings.w_l):
         def fun(x):
             if should_cancel and should_cancel():
                 raise KeyboardInterrupt
-            return problem.energy(x, world_obs)
+            return problem.energy(x)
 
         result = minimize(fun, h0.ravel(), jac=True, method="L-BFGS-B",
                           options={"maxiter": settings.max_iterations, "gtol": 1e-6})
