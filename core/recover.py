@@ -43,6 +43,17 @@ KERNELS = {
 }
 
 
+#: a second pass models again the frames whose root moved more than this (m) or whose facing
+#: turned more than this (rad) once the hips are filled
+CHANGE_ROOT = 0.01
+CHANGE_ANGLE = np.deg2rad(1.0)
+
+
+#: subspace iteration of the local PCA: extra columns and power iterations
+OVERSAMPLE = 8
+POWER_ITERATIONS = 1
+
+
 @dataclass(frozen=True)
 class KnnSettings:
     """Settings of the ``knn`` method (defaults: the paper's weights, K = 256)."""
@@ -61,7 +72,7 @@ class KnnSettings:
     #: lower bound of the model's per-coordinate noise variance (m^2)
     noise_floor: float = 1e-6
     min_present: int = 3
-    max_iterations: int = 30
+    max_iterations: int = 20
     batch_frames: int = 256
     random_state: int = 0
 
@@ -79,8 +90,8 @@ def _local_pca(neighbours, settings, rng):
     cov = (a.transpose(0, 2, 1) @ a).astype(np.float64) / max(1, k - 1)
     total = np.trace(cov, axis1=1, axis2=2)
     r = min(settings.max_components, d, k - 1)
-    y = cov @ rng.standard_normal((d, min(d, r + 8)))
-    for _ in range(2):
+    y = cov @ rng.standard_normal((d, min(d, r + OVERSAMPLE)))
+    for _ in range(POWER_ITERATIONS):
         y = cov @ _orthonormal(y)
     basis = _orthonormal(y)  # (t, d, r+8)
     small = basis.transpose(0, 2, 1) @ cov @ basis
@@ -237,8 +248,8 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
         # the root or hips were in a gap: normalise again with their filled positions, and
         # model again the frames whose normalisation changed
         root2, angle2 = frames_of(filled_pos, reference)
-        cache["changed"] = ((np.abs(root2 - root).max(axis=1) > 1e-4)
-                            | (np.abs(angle2 - angle) > 1e-3))
+        cache["changed"] = ((np.linalg.norm(root2 - root, axis=1) > CHANGE_ROOT)
+                            | (np.abs(angle2 - angle) > CHANGE_ANGLE))
         filled_pos = _fill_pass(pos, missing, root2, angle2, index, limbs, lengths, motion.fps,
                                 settings, progress, should_cancel, lambda message: None, cache,
                                 0.6, 1.0)
