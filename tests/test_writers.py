@@ -103,3 +103,29 @@ def test_motion_validates_its_input():
     pos = np.zeros((2, 1, 3))
     pos[0, 0, 1] = np.inf  # one bad coordinate hides the whole sample
     assert Motion(pos, ("A",), 30.0).missing.tolist() == [[True], [False]]
+
+
+def test_c3d_reads_all_three_gap_encodings(tmp_path):
+    """NaN, a negative residual and an exact (0, 0, 0) all mean 'missing'."""
+    import ezc3d
+
+    frames = 6
+    points = np.ones((4, 3, frames))
+    points[:3] *= np.arange(1, frames + 1) * 100.0
+    points[:3, 0, 1] = np.nan  # NaN
+    points[:3, 2, 4] = 0.0  # exact zero
+    residuals = np.ones((1, 3, frames))
+    residuals[0, 1, 3] = -1.0  # negative residual with a valid-looking position
+    c3d = ezc3d.c3d()
+    c3d["parameters"]["POINT"]["RATE"]["value"] = [100.0]
+    c3d["parameters"]["POINT"]["LABELS"]["value"] = ("Sub:A", "Sub:B", "Sub:C")
+    c3d["data"]["points"] = points
+    c3d["data"]["meta_points"] = {"residuals": residuals,
+                                  "camera_masks": np.zeros((7, 3, frames), dtype=bool)}
+    c3d.write(str(tmp_path / "gaps.c3d"))
+    motion = read_motion(tmp_path / "gaps.c3d")
+    assert motion.names == ("A", "B", "C")
+    expected = np.zeros((frames, 3), dtype=bool)
+    expected[1, 0] = expected[3, 1] = expected[4, 2] = True
+    np.testing.assert_array_equal(motion.missing, expected)
+    assert motion.positions[2, 0, 0] == pytest.approx(0.3)  # mm -> m
