@@ -243,7 +243,8 @@ def build_parser():
                    help=f"{', '.join(WRITE_FORMATS)} (chosen by extension)")
     p.add_argument("--method", default="knn",
                    choices=["knn", "linear", "spline", "svt", "pca", "intercorrelation"])
-    p.add_argument("-K", dest="k", type=int, default=256, help="neighbours per frame (knn)")
+    p.add_argument("-K", dest="k", type=int,
+                   help="neighbours per frame (knn; default 1024, or the KB size if smaller)")
     p.add_argument("--max-gap", type=int, metavar="FRAMES",
                    help="leave gaps longer than this unfilled")
     p.add_argument("--force", action="store_true", help="replace the output if it exists")
@@ -261,7 +262,7 @@ def build_parser():
                    help="only these settings, e.g. 'm=6,l=60' 'rate=0.2'")
     p.add_argument("--fps", type=float, default=60.0, help="evaluation frame rate (default 60)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("-K", dest="k", type=int, default=256)
+    p.add_argument("-K", dest="k", type=int, help="knn neighbours (default 1024)")
     p.add_argument("--skip-frames", type=int, default=0, metavar="N",
                    help="drop N leading frames of every file (6 for Daz-friendly BVH)")
     p.add_argument("--exclude-kb", action="append", metavar="GLOB",

@@ -108,7 +108,7 @@ def kb_without(kb, subject):
                          kb.source_index[keep])
 
 
-def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=256,
+def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=None,
              skip_frames=0, settings=None, exclude=(), progress=None, report=None):
     """Run a protocol; a list of result dicts (method, setting, test, rmse_missing_mm, ...)."""
     report = report or (lambda message: None)
@@ -137,7 +137,8 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=2
             query = truth.replace(positions=np.where(miss[..., None], np.nan, truth.positions))
             for method in methods:
                 start = time.perf_counter()
-                out = fill(query, method, kb=kb, settings=KnnSettings(k=min(k, kb.size)))
+                out = fill(query, method, kb=kb,
+                           settings=KnnSettings(k=None if k is None else min(k, kb.size)))
                 seconds = time.perf_counter() - start
                 err = np.linalg.norm(out.positions - truth.positions, axis=2)
                 err = np.where(np.isnan(err), np.inf, err)

@@ -26,7 +26,7 @@ Beyond the paper:
   neighbours in time (linear interpolation of the filled result).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import minimize
@@ -49,6 +49,8 @@ CHANGE_ROOT = 0.01
 CHANGE_ANGLE = np.deg2rad(1.0)
 
 
+#: neighbours per frame when KnnSettings.k is None
+DEFAULT_K = 1024
 #: subspace iteration of the local PCA: extra columns and power iterations
 OVERSAMPLE = 8
 POWER_ITERATIONS = 1
@@ -56,15 +58,20 @@ POWER_ITERATIONS = 1
 
 @dataclass(frozen=True)
 class KnnSettings:
-    """Settings of the ``knn`` method (defaults: the paper's weights, K = 256)."""
+    """Settings of the ``knn`` method (the paper's weights; see docs/METHOD_NOTES.md).
 
-    k: int = 256
+    ``k`` None means 1024 neighbours, or the whole knowledge base when it is smaller: on our
+    knowledge bases (7k-100k poses) accuracy kept improving up to K = 1024 and beyond, unlike
+    the paper's K = 256 on the whole CMU database.
+    """
+
+    k: int = None
     w_r: float = 0.55
     w_in: float = 0.9
     w_l: float = 0.3
     w_s: float = 0.15
-    variance: float = 0.99
-    max_components: int = 24
+    variance: float = 0.995
+    max_components: int = 32
     smoothness: str = "acceleration"
     #: scales that make the terms unitless: limb length error (m), acceleration (m/s^2)
     limb_scale: float = 0.01
@@ -231,7 +238,9 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
         return motion
     if not (~missing).any():
         raise GapFillError("every sample is missing: nothing to fill from")
-    if settings.k > kb.size:
+    if settings.k is None:
+        settings = replace(settings, k=min(DEFAULT_K, kb.size))
+    elif settings.k > kb.size:
         raise GapFillError(f"K = {settings.k} is larger than the knowledge base ({kb.size} poses)")
     name_to = {nm: i for i, nm in enumerate(common)}
     index = KBIndex(kb.poses[:, kb_cols])
