@@ -61,13 +61,14 @@ def stage_search(repeat):
             "speedup_vs_ckdtree": statistics.median(kd) / statistics.median(ours)}
 
 
-def stage_fill(repeat):
+def stage_fill(repeat, k=None):
     import numpy as np
 
     from mocap_gapfill.core.evaluate import punch_gaps
     from mocap_gapfill.core.fill import fill
     from mocap_gapfill.core.io import read_motion
     from mocap_gapfill.core.kb import build_kb
+    from mocap_gapfill.core.recover import KnnSettings
 
     t = time.perf_counter()
     kb = build_kb([DAZ], skip_frames=6, exclude=["13_30.bvh.gz"])
@@ -78,10 +79,10 @@ def stage_fill(repeat):
     times = []
     for _ in range(repeat):
         t = time.perf_counter()
-        out = fill(query, "knn", kb=kb)
+        out = fill(query, "knn", kb=kb, settings=KnnSettings(k=k))
         times.append(time.perf_counter() - t)
     err = np.linalg.norm(out.positions - take.positions, axis=2)[miss]
-    return {"kb_size": kb.size, "frames": 2048, "fps": take.fps, "k": 256,
+    return {"kb_size": kb.size, "frames": 2048, "fps": take.fps, "k": k or "default (1024)",
             "kb_build_s": build, "fill_median_s": statistics.median(times),
             "rmse_missing_mm": float(1000 * np.sqrt((err ** 2).mean()))}
 
@@ -98,11 +99,12 @@ def run_stage(name, repeat):
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--stage", choices=["search", "fill"])
+    parser.add_argument("--stage", choices=["search", "fill", "fill256"])
     parser.add_argument("--json")
     args = parser.parse_args()
     if args.stage:
-        result = {"search": stage_search, "fill": stage_fill}[args.stage](args.repeat)
+        result = {"search": stage_search, "fill": stage_fill,
+                  "fill256": lambda r: stage_fill(r, k=256)}[args.stage](args.repeat)
         result["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         print(json.dumps(result))
         return
@@ -115,14 +117,16 @@ def main():
     print(f"  scipy cKDTree query         median {1000 * search['ckdtree_query_median_s']:8.0f} ms"
           f"  (+ build {1000 * search['ckdtree_build_s']:.0f} ms)")
     print(f"  speed-up over cKDTree       {search['speedup_vs_ckdtree']:8.1f} x")
-    fill = run_stage("fill", args.repeat)
-    print(f"fill: {fill['frames']} frames at {fill['fps']:g} fps, 6 joints missing per 120-frame "
-          f"interval, KB {fill['kb_size']} poses (built in {fill['kb_build_s']:.1f} s)")
-    print(f"  knn fill                    median {fill['fill_median_s']:8.2f} s, "
-          f"peak RSS {fill['peak_rss_mb']:.0f} MB, RMSE missing {fill['rmse_missing_mm']:.1f} mm")
+    fills = [run_stage("fill", args.repeat), run_stage("fill256", args.repeat)]
+    print(f"fill: {fills[0]['frames']} frames at {fills[0]['fps']:g} fps, 6 joints missing per "
+          f"120-frame interval, KB {fills[0]['kb_size']} poses (built in "
+          f"{fills[0]['kb_build_s']:.1f} s; other takes of the test subject are in it)")
+    for fill in fills:
+        print(f"  knn fill, K {fill['k']!s:14s} median {fill['fill_median_s']:6.2f} s, "
+              f"peak RSS {fill['peak_rss_mb']:.0f} MB, RMSE missing {fill['rmse_missing_mm']:.1f} mm")
     if args.json:
         Path(args.json).write_text(json.dumps({"machine": machine, "search": search,
-                                               "fill": fill}, indent=1))
+                                               "fill": fills}, indent=1))
 
 
 if __name__ == "__main__":
