@@ -124,3 +124,18 @@ def test_missing_and_unknown_files(tmp_path):
     assert messages["nope.c3d"] == ("ParseError", f"{tmp_path / 'nope.c3d'}: no such file")
     assert "unknown file type .txt" in messages["notes.txt"][1]
     assert messages[tmp_path.name] [1].endswith("not a file")
+
+
+def test_a_crash_inside_the_c3d_library_is_contained(data_dir, monkeypatch):
+    """Some corrupt files damage ezc3d's memory (a later read crashes): reads run in a child
+    process, and a child that dies becomes a ParseError here, never our crash."""
+    from mocap_gapfill.core.errors import ParseError
+    from mocap_gapfill.core.formats import c3d
+
+    monkeypatch.setattr(c3d, "_READER", "import ctypes; ctypes.string_at(0)")  # segfaults
+    with pytest.raises(ParseError, match="crashed on this file"):
+        c3d.read_c3d(data_dir / "cmu/c3d/85_02.c3d")
+    monkeypatch.setattr(c3d, "_READER", "import time; time.sleep(30)")
+    monkeypatch.setattr(c3d, "READ_TIMEOUT", 1)
+    with pytest.raises(ParseError, match="over 1 s"):
+        c3d.read_c3d(data_dir / "cmu/c3d/85_02.c3d")

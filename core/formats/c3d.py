@@ -1,16 +1,22 @@
 """C3D reader and writer (through ezc3d), with the guards its native code needs.
 
 ezc3d aborts or crashes the whole process on some inputs (a corrupt file, a write without a
-frame rate), which inside Blender would take the user's session down. So every file is checked
-structurally in pure Python (:func:`precheck`) before ezc3d reads it, and everything ezc3d needs is
-validated before it writes.
+frame rate), which inside Blender would take the user's session down. Worse, some corrupt files
+damage its memory without crashing at once (a later read then crashes: seen in batch fuzzing).
+So every file is checked structurally in pure Python (:func:`precheck`), then read by ezc3d in a
+short-lived child process whose arrays come back through a temporary ``.npz``: a crash or a hang
+there becomes a :class:`ParseError`. Everything ezc3d needs is validated before it writes.
 
 Gaps: a sample is missing when ezc3d gives NaN (its encoding of residual < 0), when the residual is
 negative, or when the point is exactly (0, 0, 0) (how some systems write gaps). A present sample
 with residual exactly 0 was interpolated by some program: it reads as *filled*.
 """
 
+import os
 import struct
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +27,37 @@ from ..motion import Motion, rigid_marker_pairs, y_up_to_z_up
 #: C3D frame counts are 16-bit in the header: more frames come back truncated from ezc3d
 MAX_FRAMES = 65535
 _UNITS = {"mm": ("mm", 0.001), "cm": ("cm", 0.01), "m": ("m", 1.0), "in": ("in", 0.0254)}
+#: seconds one read may take in the child process
+READ_TIMEOUT = 120
+#: the child process: read with ezc3d, save what we need (no pickle), exit 3 on a reported error
+_READER = r"""
+import sys
+import numpy as np
+import ezc3d
+try:
+    c3d = ezc3d.c3d(sys.argv[1])
+    point = c3d["parameters"]["POINT"]
+    labels = []
+    for key in ["LABELS"] + ["LABELS%d" % i for i in range(2, 100)]:
+        if key not in point:
+            break
+        labels.extend(str(v) for v in point[key]["value"])
+    def text(name, default):
+        value = point.get(name, {}).get("value")
+        return str(value[0]) if value is not None and len(value) else default
+    try:
+        rate = float(point["RATE"]["value"][0])
+    except Exception:
+        rate = float("nan")
+    residuals = c3d["data"].get("meta_points", {}).get("residuals")
+    np.savez(sys.argv[2], points=np.asarray(c3d["data"]["points"], dtype=np.float64),
+             residuals=np.asarray(residuals if residuals is not None else np.zeros((0, 0, 0))),
+             labels=np.array(labels, dtype=str), rate=np.float64(rate),
+             units=np.str_(text("UNITS", "mm")), y_screen=np.str_(text("Y_SCREEN", "+Z")))
+except Exception as exc:
+    print(exc, file=sys.stderr)
+    sys.exit(3)
+"""
 #: observed samples get this residual on write (their true residual is not kept in a Motion)
 OBSERVED_RESIDUAL = 1.0
 
@@ -140,14 +177,9 @@ def precheck(path):
     return {"points": points, "frames": frames, "rate": rate}
 
 
-def _labels(parameters, count, path):
-    point = parameters["POINT"]
-    raw = []
-    for key in ["LABELS"] + [f"LABELS{i}" for i in range(2, 100)]:
-        if key not in point:
-            break
-        raw.extend(str(v).strip() for v in point[key]["value"])
-    raw = raw[:count] + [""] * (count - len(raw))
+def _labels(raw, count):
+    """Point names from the file's labels: prefixes dropped where that keeps them unique."""
+    raw = [label.strip() for label in raw[:count]] + [""] * (count - len(raw))
     raw = [label if label else f"P{i}" for i, label in enumerate(raw)]
     short = [label.split(":")[-1] or label for label in raw]  # "Male:LFHD" -> "LFHD"
     names = [s if short.count(s) == 1 else r for s, r in zip(short, raw)]
@@ -159,43 +191,55 @@ def _labels(parameters, count, path):
     return names
 
 
+def _read_isolated(path):
+    """ezc3d's read in a child process: the arrays, or a ParseError (also on a crash/hang)."""
+    with tempfile.TemporaryDirectory(prefix="mocap_gapfill_c3d_") as tmp:
+        out = Path(tmp) / "read.npz"
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+        try:
+            proc = subprocess.run([sys.executable, "-c", _READER, str(path), str(out)], env=env,
+                                  capture_output=True, text=True, timeout=READ_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            raise ParseError(f"reading took over {READ_TIMEOUT} s (corrupt file?)", path) from None
+        if proc.returncode == 3:
+            reason = proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else "unknown"
+            raise ParseError(f"unreadable C3D ({reason})", path)
+        if proc.returncode != 0 or not out.is_file():
+            raise ParseError(f"the C3D library crashed on this file (exit {proc.returncode}): "
+                             "it is corrupt", path)
+        with np.load(out, allow_pickle=False) as npz:
+            return {k: npz[k] for k in npz.files}
+
+
 def read_c3d(path):
     """Read a C3D file into a :class:`Motion` of markers (see the module docstring for gaps)."""
     info = precheck(path)
-    import ezc3d
-
-    try:
-        c3d = ezc3d.c3d(str(path))
-    except Exception as exc:  # ezc3d raises RuntimeError/ValueError/IndexError on bad files
-        raise ParseError(f"unreadable C3D ({exc})", path) from None
-    points = np.asarray(c3d["data"]["points"], dtype=np.float64)
+    data = _read_isolated(path)
+    points = data["points"]
     if points.ndim != 3 or points.shape[0] < 3:
         raise ParseError("no point data", path)
-    parameters = c3d["parameters"]
-    try:
-        rate = float(parameters["POINT"]["RATE"]["value"][0])
-    except (KeyError, IndexError, TypeError, ValueError):
+    rate = float(data["rate"])
+    if not np.isfinite(rate):
         rate = info["rate"]
     if not np.isfinite(rate) or rate <= 0:
         raise ParseError(f"bad frame rate {rate}", path)
-    unit_text = str((parameters["POINT"].get("UNITS", {}).get("value") or ["mm"])[0]).strip().lower()
+    unit_text = str(data["units"]).strip().lower()
     if unit_text not in _UNITS:
         raise ParseError(f"unknown point units {unit_text!r}", path)
     units, scale = _UNITS[unit_text]
     pos = points[:3].transpose(2, 1, 0) * scale  # (frames, points, 3)
-    residuals = c3d["data"].get("meta_points", {}).get("residuals")
+    residuals = data["residuals"]
     missing = ~np.isfinite(pos).all(axis=2) | np.all(pos == 0, axis=2)
     filled = np.zeros_like(missing)
-    if residuals is not None and np.shape(residuals)[1:] == points.shape[1:]:
-        res = np.asarray(residuals)[0].T
+    if residuals.ndim == 3 and residuals.shape[1:] == points.shape[1:]:
+        res = residuals[0].T
         missing |= res < 0
         filled = (res == 0) & ~missing
     pos[missing] = np.nan
-    screen_y = str((parameters["POINT"].get("Y_SCREEN", {}).get("value") or ["+Z"])[0]).upper()
-    up = "y" if screen_y.strip() == "+Y" else "z"
+    up = "y" if str(data["y_screen"]).strip().upper() == "+Y" else "z"
     if up == "y":
         pos = y_up_to_z_up(pos)
-    names = _labels(parameters, pos.shape[1], path)
+    names = _labels(data["labels"].tolist(), pos.shape[1])
     return Motion(
         positions=pos,
         names=tuple(names),
