@@ -314,7 +314,7 @@ def _fill_pass(pos, missing, root, angle, index, limbs, lengths, fps, settings, 
             raise KeyboardInterrupt
         rows = todo[start:start + settings.batch_frames]
         sel = frames[rows]
-        idx, _ = index.search(obs_norm[sel], ~model[sel], settings.k)
+        idx, _ = index.search(obs_norm[sel], ~model[sel], settings.k, ordered=False)
         neighbours = flat_kb[idx]  # float32: the covariance is summed in float32, then float64
         means[rows], comps[rows], lams[rows], noise[rows] = _local_pca(neighbours, settings, rng)
         progress(p0 + (p1 - p0) * 0.7 * (start + len(sel)) / max(1, len(todo)),

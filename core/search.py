@@ -41,7 +41,7 @@ class KBIndex:
         self._rhs = np.ascontiguousarray(np.concatenate([flat, sq], axis=1).T)
         self._flat = flat
 
-    def search(self, queries, present, k, progress=None, should_cancel=None):
+    def search(self, queries, present, k, ordered=True, progress=None, should_cancel=None):
         """Exact K nearest poses for each query over its present points.
 
         Parameters
@@ -51,11 +51,15 @@ class KBIndex:
         present : ndarray, shape (q, points), bool
         k : int
             Neighbours per query (at most the KB size).
+        ordered : bool
+            True: neighbours nearest first, distances from direct differences. False: the same
+            set of neighbours (up to float32 rounding at the K-th distance) in no order, with
+            float32 distances, skipping the re-ranking (what a local model needs).
 
         Returns
         -------
         index : ndarray, shape (q, k), int64
-            KB rows, nearest first.
+            KB rows, nearest first when ``ordered``.
         dist2 : ndarray, shape (q, k), float64
             Squared distances over the present points.
 
@@ -79,12 +83,20 @@ class KBIndex:
         out_idx = np.empty((len(q), k), dtype=np.int64)
         out_d2 = np.empty((len(q), k))
         lhs = np.concatenate([-2.0 * q.reshape(len(q), -1), present.astype(np.float32)], axis=1)
+        qsq = (q.astype(np.float64) ** 2).sum(axis=(1, 2))
         rows = max(1, BLOCK_BYTES // (4 * self.n))
         for start in range(0, len(q), rows):
             if should_cancel and should_cancel():
                 raise KeyboardInterrupt
             sel = slice(start, start + rows)
             d = lhs[sel] @ self._rhs  # (rows, n): squared distance minus |q|^2
+            if not ordered:
+                cand = _smallest(d, k)
+                out_idx[sel] = cand
+                out_d2[sel] = np.take_along_axis(d, cand, axis=1) + qsq[sel, None]
+                if progress:
+                    progress(min(len(q), start + rows) / len(q), "searching")
+                continue
             cand = _smallest(d, min(self.n, k + MARGIN))
             # direct differences on the candidates (no cancellation), then the final K in order
             diff = self._flat[cand] - q[sel].reshape(len(d), 1, -1)

@@ -174,3 +174,20 @@ def test_hips_hidden_at_the_clip_end(daz_kb, walk):
     knn = _rmse_mm(fill(query, "knn", kb=kb), walk, miss)
     linear = _rmse_mm(fill(query, "linear"), walk, miss)
     assert knn < 40 and knn < linear / 5, (knn, linear)
+
+
+def test_unordered_search_returns_the_same_neighbour_sets(daz_kb):
+    rng = np.random.default_rng(1)
+    queries = daz_kb.poses[rng.choice(daz_kb.size, 60, replace=False)] + rng.normal(
+        scale=0.03, size=(60, 43, 3))
+    present = rng.random((60, 43)) > 0.2
+    index = KBIndex(daz_kb.poses)
+    ordered, d_ordered = index.search(queries, present, 128)
+    unordered, d_unordered = index.search(queries, present, 128, ordered=False)
+    kth = d_ordered[:, -1]
+    for q, m, got, limit in zip(queries, present, unordered, kth):
+        exact = ((daz_kb.poses[got][:, m] - q[m]) ** 2).sum(axis=(1, 2))
+        # every neighbour returned is within float32 rounding of the exact K-th distance
+        assert exact.max() <= limit + 1e-5, (exact.max(), limit)
+        assert len(set(got)) == 128
+    np.testing.assert_allclose(np.sort(d_unordered, axis=1), d_ordered, rtol=1e-3, atol=1e-5)
