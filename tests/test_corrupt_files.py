@@ -139,3 +139,53 @@ def test_a_crash_inside_the_c3d_library_is_contained(data_dir, monkeypatch):
     monkeypatch.setattr(c3d, "READ_TIMEOUT", 1)
     with pytest.raises(ParseError, match="over 1 s"):
         c3d.read_c3d(data_dir / "cmu/c3d/85_02.c3d")
+
+
+# Byte edits of cmu/c3d/85_02.c3d found by structured mutation (docs/ROBUSTNESS.md) that pass our
+# precheck and make ezc3d 1.7.2 itself segfault or hang when it reads the file.
+EZC3D_CRASHES = {
+    "crash143": [(853, 222), (1171, 218), (1177, 147), (2069, 213), (2278, 165), (2824, 68),
+                 (3053, 90), (3125, 1), (3866, 55)],
+    "crash445": [(687, 179), (2262, 102), (2300, 219), (2389, 194), (2966, 102)],
+}
+EZC3D_HANG = [(117, 193), (605, 250), (1644, 159), (1988, 242), (2045, 140), (2416, 18),
+              (2463, 138), (2917, 33), (3801, 222)]
+
+
+def _edited(data_dir, tmp_path, name, edits):
+    data = bytearray((data_dir / "cmu/c3d/85_02.c3d").read_bytes())
+    for offset, value in edits:
+        data[offset] = value
+    path = tmp_path / f"{name}.c3d"
+    path.write_bytes(bytes(data))
+    return path
+
+
+def _raw_ezc3d(path, timeout):
+    try:
+        return subprocess.run([sys.executable, "-c", "import sys, ezc3d; ezc3d.c3d(sys.argv[1])",
+                               str(path)], capture_output=True, timeout=timeout).returncode
+    except subprocess.TimeoutExpired:
+        return "hang"
+
+
+def test_files_that_crash_ezc3d_give_parse_errors(data_dir, tmp_path):
+    from mocap_gapfill.core.errors import ParseError
+    from mocap_gapfill.core.formats.c3d import read_c3d
+
+    for name, edits in EZC3D_CRASHES.items():
+        path = _edited(data_dir, tmp_path, name, edits)
+        assert _raw_ezc3d(path, 60) < 0, "ezc3d no longer crashes on this file"
+        with pytest.raises(ParseError, match="crashed on this file"):
+            read_c3d(path)
+
+
+def test_a_file_that_hangs_ezc3d_gives_a_parse_error(data_dir, tmp_path, monkeypatch):
+    from mocap_gapfill.core.errors import ParseError
+    from mocap_gapfill.core.formats import c3d
+
+    path = _edited(data_dir, tmp_path, "hang0", EZC3D_HANG)
+    assert _raw_ezc3d(path, 5) == "hang", "ezc3d no longer hangs on this file"
+    monkeypatch.setattr(c3d, "READ_TIMEOUT", 3)
+    with pytest.raises(ParseError, match="took over 3 s"):
+        c3d.read_c3d(path)
