@@ -22,8 +22,8 @@ Beyond the paper:
   the observed data without a jump; at clip ends the one known offset is kept;
 - smoothness penalises acceleration by default (the paper's term, ``smoothness="paper"``, pulls
   each frame towards the previous ones and lags on fast motion);
-- frames with fewer than ``min_present`` points present get the model only from their
-  neighbours in time (linear interpolation of the filled result).
+- frames with fewer than ``min_present`` points present are not modelled: their prediction is
+  interpolated in time from the model trajectory around them, then blended like any other.
 """
 
 from dataclasses import dataclass, replace
@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import minimize
 
+from .baselines import fill_linear
 from .errors import GapFillError
 from .kb import match_names
 from .normalize import denormalize, frames_of, normalize, rotation_z
@@ -337,10 +338,12 @@ def _fill_pass(pos, missing, root, angle, index, limbs, lengths, fps, settings, 
     pred_norm = problem.poses(h).reshape(m, n, 3)
     pred = np.full_like(pos, np.nan)
     pred[frames] = denormalize(pred_norm, root[frames], angle[frames])
-    filled_pos = _blend_into_gaps(pos, pred, missing, model)
     if empty.any():
-        filled_pos = _interpolate_frames(filled_pos, empty)
-    return filled_pos
+        # too little present to model: predict from the model trajectory around those frames
+        trajectory = np.where(model[..., None], pred, pos)
+        trajectory[empty] = np.nan
+        pred[empty] = fill_linear(trajectory)[empty]
+    return _blend_into_gaps(pos, pred, missing, model)
 
 
 def _clip_lengths(pos, limbs, kb_poses):
@@ -381,16 +384,4 @@ def _blend_into_gaps(pos, pred, missing, model):
             else:
                 shift = 0.0
             out[a:b + 1, p] = seg + shift
-    return out
-
-
-def _interpolate_frames(pos, frames_mask):
-    """Replace the given frames by linear interpolation in time, per point and coordinate."""
-    out = pos.copy()
-    t = np.arange(len(pos))
-    for p in range(pos.shape[1]):
-        ok = ~frames_mask & np.isfinite(pos[:, p, 0])
-        if ok.any():
-            for c in range(3):
-                out[frames_mask, p, c] = np.interp(t[frames_mask], t[ok], pos[ok, p, c])
     return out

@@ -150,6 +150,17 @@ def test_gaps_at_clip_ends_and_frames_with_nothing_present(daz_kb, walk):
     assert np.all((blank >= np.minimum(lo, hi) - 1e-9) & (blank <= np.maximum(lo, hi) + 1e-9))
 
 
+def test_a_gap_running_through_frames_with_nothing_present(daz_kb, walk):
+    """Frames without data inside a longer gap: the whole gap is filled, not only those frames."""
+    kb = kb_without(daz_kb, "07")
+    miss = np.zeros(walk.missing.shape, dtype=bool)
+    miss[100:160, walk.names.index("lHand")] = True
+    miss[150:153] = True
+    out = fill(_gappy(walk, miss), "knn", kb=kb)
+    assert not out.missing.any()
+    assert _rmse_mm(out, walk, miss) < 120
+
+
 def test_k_larger_than_the_knowledge_base(daz_kb, walk):
     miss = np.zeros(walk.missing.shape, dtype=bool)
     miss[10:20, 5] = True
