@@ -17,16 +17,13 @@ missing in every frame stay NaN where a method has nothing to go on.
 import numpy as np
 
 from .errors import GapFillError
+from .motion import interpolate_rows
 
 
 def fill_linear(pos):
     out = pos.copy()
-    t = np.arange(len(pos))
     for p in range(pos.shape[1]):
-        ok = np.isfinite(pos[:, p, 0])
-        if ok.any() and not ok.all():
-            for c in range(3):
-                out[~ok, p, c] = np.interp(t[~ok], t[ok], pos[ok, p, c])
+        out[:, p] = interpolate_rows(pos[:, p], np.isfinite(pos[:, p, 0]))
     return out
 
 

@@ -174,13 +174,7 @@ class Motion:
     # ---- statistics --------------------------------------------------------------------------
     def gap_runs(self):
         """Every gap as ``(point, first_frame, last_frame)`` (inclusive), point-major order."""
-        runs = []
-        miss = self.missing
-        for p in range(self.n_points):
-            m = np.concatenate([[False], miss[:, p], [False]]).astype(np.int8)
-            edges = np.flatnonzero(np.diff(m))
-            runs.extend((p, int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2]))
-        return runs
+        return gap_runs(self.missing)
 
     def summary(self):
         """A dict of the facts ``mocap-gapfill info`` prints."""
@@ -202,6 +196,30 @@ class Motion:
             "longest_gap_point": None if longest is None else self.names[longest[0]],
             "limbs": int(len(self.limbs)),
         }
+
+
+def gap_runs(missing):
+    """Runs of True per column of a (frames, points) mask: ``(point, first, last)`` inclusive,
+    point-major order."""
+    runs = []
+    for p in range(missing.shape[1]):
+        m = np.concatenate([[False], missing[:, p], [False]]).astype(np.int8)
+        edges = np.flatnonzero(np.diff(m))
+        runs.extend((p, int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2]))
+    return runs
+
+
+def interpolate_rows(values, valid):
+    """Rows of ``values`` (frames, ...) where ``valid`` is False, filled by linear interpolation
+    in time from the valid rows (held constant before the first and after the last)."""
+    if valid.all() or not valid.any():
+        return values
+    frames = np.arange(len(values))
+    flat = values.reshape(len(values), -1)
+    out = flat.copy()
+    for k in range(flat.shape[1]):
+        out[~valid, k] = np.interp(frames[~valid], frames[valid], flat[valid, k])
+    return out.reshape(values.shape)
 
 
 def snap_fps(fps):

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import GapFillError
+from .motion import interpolate_rows
 
 # (root point names, left-side names, right-side names): the first whose names are all present
 # in a point set is used. Case-insensitive. Lists mean "the mean of these points".
@@ -84,17 +85,6 @@ def find_reference(names):
         f"among {', '.join(names[:12])}{'...' if len(names) > 12 else ''}")
 
 
-def _interpolate_missing(values, valid):
-    """Fill rows of ``values`` (frames, k) where ``valid`` is False by linear interpolation."""
-    if valid.all():
-        return values
-    frames = np.arange(len(values))
-    out = values.copy()
-    for k in range(values.shape[1]):
-        out[~valid, k] = np.interp(frames[~valid], frames[valid], values[valid, k])
-    return out
-
-
 def frames_of(positions, reference):
     """Per-frame root (frames, 3) and facing angle (frames,) of a motion, robust to gaps.
 
@@ -112,8 +102,8 @@ def frames_of(positions, reference):
         raise GapFillError("the root and hip points are missing in every frame: cannot normalise")
     unwrapped = np.zeros(len(angle))
     unwrapped[known] = np.unwrap(angle[known])
-    root = _interpolate_missing(root, known)
-    angle = _interpolate_missing(unwrapped[:, None], known)[:, 0]
+    root = interpolate_rows(root, known)
+    angle = interpolate_rows(unwrapped[:, None], known)[:, 0]
     edges = np.flatnonzero(np.diff(np.concatenate([[0], (~known).astype(np.int8), [0]])))
     # steadiness of each mirror pair's angle against the hip line, over the known frames
     offsets, spread = [], []

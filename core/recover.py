@@ -34,6 +34,7 @@ from scipy.optimize import minimize
 from .baselines import fill_linear
 from .errors import GapFillError
 from .kb import match_names
+from .motion import gap_runs
 from .normalize import denormalize, frames_of, normalize, rotation_z
 from .search import KBIndex
 
@@ -234,7 +235,6 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
     q_index = [motion.names.index(n) for n in common]
     pos = motion.positions[:, q_index]
     missing = np.isnan(pos[..., 0])
-    n_frames, n = missing.shape
     if not missing.any():
         return motion
     if not (~missing).any():
@@ -249,10 +249,21 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
                         if kb.names[a] in name_to and kb.names[b] in name_to], dtype=np.int64)
     limbs = limbs.reshape(-1, 2)
     lengths = _clip_lengths(pos, limbs, index.poses)
+    # the model's mask: the gaps, widened by one frame each side (boundary predictions)
+    model = missing.copy()
+    model[1:] |= missing[:-1]
+    model[:-1] |= missing[1:]
+    thin = (~model).sum(axis=1) < settings.min_present
+    model[thin] = missing[thin]  # too little left: do not widen there
+    empty = (~missing).sum(axis=1) < settings.min_present
+    if empty.any():
+        report(f"{int(empty.sum())} frames have fewer than {settings.min_present} points present: "
+               "filled from the frames around them")
+    masks = (missing, model, empty)
     root, angle = frames_of(pos, reference)
     cache = {}
-    filled_pos = _fill_pass(pos, missing, root, angle, index, limbs, lengths, motion.fps,
-                            settings, progress, should_cancel, report, cache, 0.0, 0.6)
+    filled_pos = _fill_pass(pos, masks, root, angle, index, limbs, lengths, motion.fps,
+                            settings, progress, should_cancel, cache, 0.0, 0.6)
     ref_points = list({*reference.root, *reference.left, *reference.right})
     if missing[:, ref_points].any():
         # the root or hips were in a gap: normalise again with their filled positions, and
@@ -260,9 +271,8 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
         root2, angle2 = frames_of(filled_pos, reference)
         cache["changed"] = ((np.linalg.norm(root2 - root, axis=1) > CHANGE_ROOT)
                             | (np.abs(angle2 - angle) > CHANGE_ANGLE))
-        filled_pos = _fill_pass(pos, missing, root2, angle2, index, limbs, lengths, motion.fps,
-                                settings, progress, should_cancel, lambda message: None, cache,
-                                0.6, 1.0)
+        filled_pos = _fill_pass(pos, masks, root2, angle2, index, limbs, lengths, motion.fps,
+                                settings, progress, should_cancel, cache, 0.6, 1.0)
     out = motion.positions.copy()
     out[:, q_index] = filled_pos
     filled = np.zeros_like(motion.missing)
@@ -273,28 +283,19 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
     return motion.replace(positions=out, filled=filled)
 
 
-def _fill_pass(pos, missing, root, angle, index, limbs, lengths, fps, settings, progress,
-               should_cancel, report, cache, p0, p1):
+def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, progress,
+               should_cancel, cache, p0, p1):
     """One normalise - search - model - optimise - blend pass; the filled positions.
 
-    ``cache`` keeps the local models of the first pass; a second pass models again only the
-    frames flagged in ``cache["changed"]``.
+    ``masks`` are (missing, model, empty): the gaps, the points the model provides (the gaps
+    widened by a frame), and the frames with too little present to model. ``cache`` keeps the
+    local models of the first pass; a second pass models again only the frames flagged in
+    ``cache["changed"]``.
     """
-    n_frames, n = missing.shape
+    missing, model, empty = masks
+    n = missing.shape[1]
     obs_norm = normalize(pos, root, angle)
-
-    # the model's mask: the gaps, widened by one frame each side (boundary predictions)
-    model = missing.copy()
-    model[1:] |= missing[:-1]
-    model[:-1] |= missing[1:]
-    present_count = (~model).sum(axis=1)
-    thin = present_count < settings.min_present
-    model[thin] = missing[thin]  # too little left: do not widen there
-    empty = (~missing).sum(axis=1) < settings.min_present
     frames = np.flatnonzero(model.any(axis=1) & ~empty)
-    if empty.any():
-        report(f"{int(empty.sum())} frames have fewer than {settings.min_present} points present: "
-               "filled from the frames around them")
 
     rng = np.random.default_rng(settings.random_state)
     m = len(frames)
@@ -363,25 +364,18 @@ def _blend_into_gaps(pos, pred, missing, model):
     """Observed values kept; each gap takes the prediction plus the observation-minus-prediction
     offset at its two ends, blended linearly (one end at clip ends)."""
     out = pos.copy()
-    n_frames, n = missing.shape
-    for p in range(n):
-        m = np.concatenate([[False], missing[:, p], [False]]).astype(np.int8)
-        edges = np.flatnonzero(np.diff(m))
-        for a, b in zip(edges[::2], edges[1::2] - 1):
-            seg = pred[a:b + 1, p]
-            if np.isnan(seg).any():
-                continue
-            offsets = []
-            if a > 0 and model[a - 1, p] and np.isfinite(pred[a - 1, p]).all():
-                offsets.append((a - 1, pos[a - 1, p] - pred[a - 1, p]))
-            if b < n_frames - 1 and model[b + 1, p] and np.isfinite(pred[b + 1, p]).all():
-                offsets.append((b + 1, pos[b + 1, p] - pred[b + 1, p]))
-            if len(offsets) == 2:
-                t = (np.arange(a, b + 1) - (a - 1)) / (b + 2 - a)
-                shift = offsets[0][1] * (1 - t)[:, None] + offsets[1][1] * t[:, None]
-            elif offsets:
-                shift = offsets[0][1][None, :]
-            else:
-                shift = 0.0
-            out[a:b + 1, p] = seg + shift
+    n_frames = len(pos)
+    for p, a, b in gap_runs(missing):
+        seg = pred[a:b + 1, p]
+        if np.isnan(seg).any():
+            continue
+        ends = [t for t in (a - 1, b + 1) if 0 <= t < n_frames and model[t, p]
+                and np.isfinite(pred[t, p]).all()]
+        offsets = [pos[t, p] - pred[t, p] for t in ends]
+        if len(offsets) == 2:
+            w = ((np.arange(a, b + 1) - (a - 1)) / (b + 2 - a))[:, None]
+            shift = offsets[0] * (1 - w) + offsets[1] * w
+        else:
+            shift = offsets[0] if offsets else 0.0
+        out[a:b + 1, p] = seg + shift
     return out

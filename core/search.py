@@ -90,21 +90,18 @@ class KBIndex:
                 raise KeyboardInterrupt
             sel = slice(start, start + rows)
             d = lhs[sel] @ self._rhs  # (rows, n): squared distance minus |q|^2
-            if not ordered:
-                cand = _smallest(d, k)
-                out_idx[sel] = cand
+            if ordered:
+                cand = _smallest(d, min(self.n, k + MARGIN))
+                # direct differences on the candidates (no cancellation), then the K in order
+                diff = self._flat[cand] - q[sel].reshape(len(d), 1, -1)
+                diff *= np.repeat(present[sel], 3, axis=1)[:, None, :]
+                exact = np.einsum("qkd,qkd->qk", diff, diff, dtype=np.float64)
+                order = np.argsort(exact, axis=1, kind="stable")[:, :k]
+                out_idx[sel] = np.take_along_axis(cand, order, axis=1)
+                out_d2[sel] = np.take_along_axis(exact, order, axis=1)
+            else:
+                out_idx[sel] = cand = _smallest(d, k)
                 out_d2[sel] = np.take_along_axis(d, cand, axis=1) + qsq[sel, None]
-                if progress:
-                    progress(min(len(q), start + rows) / len(q), "searching")
-                continue
-            cand = _smallest(d, min(self.n, k + MARGIN))
-            # direct differences on the candidates (no cancellation), then the final K in order
-            diff = self._flat[cand] - q[sel].reshape(len(d), 1, -1)
-            diff *= np.repeat(present[sel], 3, axis=1)[:, None, :]
-            exact = np.einsum("qkd,qkd->qk", diff, diff, dtype=np.float64)
-            order = np.argsort(exact, axis=1, kind="stable")[:, :k]
-            out_idx[sel] = np.take_along_axis(cand, order, axis=1)
-            out_d2[sel] = np.take_along_axis(exact, order, axis=1)
             if progress:
                 progress(min(len(q), start + rows) / len(q), "searching")
         return out_idx, out_d2
