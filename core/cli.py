@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import GapFillError
+from .fill import METHODS
 from .io import READ_FORMATS, WRITE_FORMATS, read_motion, write_motion
 from .motion import UNIT_SCALES
 
@@ -67,10 +68,18 @@ def cmd_info(args):
     return 1 if failed else 0
 
 
+def _check_output(dst, force, src=None):
+    """Refuse, before any work, to replace a file (above all the input) unless forced."""
+    dst = Path(dst)
+    if dst.exists() and not force:
+        if src is not None and dst.resolve() == Path(src).resolve():
+            raise GapFillError("output is the input file; pass --force to replace it")
+        raise GapFillError(f"{dst} exists; pass --force to replace it")
+
+
 def cmd_convert(args):
     src, dst = Path(args.input), Path(args.output)
-    if dst.exists() and dst.resolve() == src.resolve() and not args.force:
-        raise GapFillError("output is the input file; pass --force to replace it")
+    _check_output(dst, args.force, src)
     motion = read_motion(src, **_read_kwargs(args))
     write_motion(motion, dst, overwrite=args.force)
     print(f"wrote {dst} ({motion.n_frames} frames, {motion.n_points} points)")
@@ -107,8 +116,7 @@ def cmd_kb_build(args):
     from .kb import build_kb
 
     out = Path(args.output)
-    if out.exists() and not args.force:
-        raise GapFillError(f"{out} exists; pass --force to replace it")
+    _check_output(out, args.force)
     progress = Progress(args.quiet)
     kb = build_kb(args.sources, fps=args.fps, exclude=args.exclude or (),
                   skip_frames=args.skip_frames, stride=args.stride,
@@ -121,32 +129,21 @@ def cmd_kb_build(args):
     return 0
 
 
-def _knn_settings(args):
-    from .recover import KnnSettings
-
-    return KnnSettings(k=args.k)
-
-
 def cmd_fill(args):
     from .fill import NEEDS_KB, fill
     from .kb import load_kb
+    from .recover import KnnSettings
 
     src, dst = Path(args.input), Path(args.output)
-    if dst.exists() and dst.resolve() == src.resolve() and not args.force:
-        raise GapFillError("output is the input file; pass --force to replace it")
-    if dst.exists() and not args.force:
-        raise GapFillError(f"{dst} exists; pass --force to replace it")
+    _check_output(dst, args.force, src)
     motion = read_motion(src, **_read_kwargs(args))
     kb = load_kb(args.kb) if args.kb else None
     if kb is None and args.method in NEEDS_KB:
         raise GapFillError(f"method {args.method!r} needs a knowledge base: -k KB.npz "
                            "(make one with 'mocap-gapfill kb build')")
     progress = Progress(args.quiet)
-    if args.max_gap:
-        motion, kept = _limit_gaps(motion, args.max_gap)
-    else:
-        kept = None
-    out = fill(motion, args.method, kb=kb, settings=_knn_settings(args), progress=progress,
+    kept = _long_gaps(motion, args.max_gap) if args.max_gap else None
+    out = fill(motion, args.method, kb=kb, settings=KnnSettings(k=args.k), progress=progress,
                report=_report)
     progress.done()
     if kept is not None:
@@ -160,23 +157,19 @@ def cmd_fill(args):
     return 0
 
 
-def _limit_gaps(motion, max_gap):
-    """Gaps longer than ``max_gap`` frames are left unfilled: the mask of those samples."""
+def _long_gaps(motion, max_gap):
+    """Mask of the samples in gaps longer than ``max_gap`` frames (left unfilled)."""
     kept = np.zeros(motion.missing.shape, dtype=bool)
     for p, a, b in motion.gap_runs():
         if b - a + 1 > max_gap:
             kept[a:b + 1, p] = True
-    return motion, kept
+    return kept
 
 
 def cmd_evaluate(args):
     from .evaluate import evaluate, table
-    from .fill import METHODS
 
     methods = args.methods or list(METHODS)
-    unknown = [m for m in methods if m not in METHODS]
-    if unknown:
-        raise GapFillError(f"unknown methods: {', '.join(unknown)}")
     progress = Progress(args.quiet)
     results = evaluate(args.protocol, args.test, args.kb_sources, methods=methods, fps=args.fps,
                        seed=args.seed, k=args.k, skip_frames=args.skip_frames,
@@ -241,8 +234,7 @@ def build_parser():
     p.add_argument("-k", "--kb", help="knowledge base (.npz) for the knn and pca methods")
     p.add_argument("-o", "--output", required=True,
                    help=f"{', '.join(WRITE_FORMATS)} (chosen by extension)")
-    p.add_argument("--method", default="knn",
-                   choices=["knn", "linear", "spline", "svt", "pca", "intercorrelation"])
+    p.add_argument("--method", default="knn", choices=METHODS)
     p.add_argument("-K", dest="k", type=int,
                    help="neighbours per frame (knn; default 1024, or the KB size if smaller)")
     p.add_argument("--max-gap", type=int, metavar="FRAMES",
@@ -257,7 +249,8 @@ def build_parser():
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")
     p.add_argument("--kb-sources", nargs="+", required=True, metavar="PATH",
                    help="knowledge-base files/folders (the test subject is left out)")
-    p.add_argument("--methods", nargs="+", metavar="METHOD", help="default: all")
+    p.add_argument("--methods", nargs="+", metavar="METHOD", choices=METHODS,
+                   help=f"some of {', '.join(METHODS)} (default: all)")
     p.add_argument("--settings", nargs="+", metavar="LABEL",
                    help="only these settings, e.g. 'm=6,l=60' 'rate=0.2'")
     p.add_argument("--fps", type=float, default=60.0, help="evaluation frame rate (default 60)")

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import GapFillError
-from .evaluate import punch_gaps
+from .evaluate import punch_gaps, rmse_mm, with_gaps
 from .fill import fill
 from .io import read_motion, write_motion
 from .kb import build_kb
@@ -42,14 +42,13 @@ def run_demo(outdir="out", data=None, progress=None, report=print):
     common = [n for n in truth.names if n in kb2.names]
     truth = truth.select(common)
     miss = punch_gaps(truth.n_frames, truth.n_points, "markers", 0.2, np.random.default_rng(0))
-    query = truth.replace(positions=np.where(miss[..., None], np.nan, truth.positions))
+    query = with_gaps(truth, miss)
     report("85_02.c3d with 20 % of the markers removed per 60-frame interval "
            "(knowledge base: 01_01 + 135_02):")
     scores = {}
     for method in ("knn", "linear", "spline", "pca", "intercorrelation"):
         result = fill(query, method, kb=kb2)
-        err = np.linalg.norm(result.positions - truth.positions, axis=2)[miss]
-        scores[method] = 1000 * float(np.sqrt((err ** 2).mean()))
+        scores[method] = rmse_mm(result, truth, miss)
         report(f"  {method:17s} RMSE over missing markers {scores[method]:7.1f} mm")
         if method == "knn":
             write_motion(result, outdir / "85_02_punched_filled.c3d", overwrite=True)

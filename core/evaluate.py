@@ -18,7 +18,7 @@ import numpy as np
 
 from .errors import GapFillError
 from .fill import METHODS, fill
-from .kb import KnowledgeBase, build_kb
+from .kb import KnowledgeBase, build_kb, resample
 from .io import read_motion
 from .recover import KnnSettings
 
@@ -98,6 +98,21 @@ def settings_of(protocol):
     raise GapFillError(f"unknown protocol {protocol!r}")
 
 
+def with_gaps(motion, miss):
+    """The motion with the samples of the mask ``miss`` (frames, points) removed."""
+    return motion.replace(positions=np.where(miss[..., None], np.nan, motion.positions))
+
+
+def rmse_mm(filled, truth, mask=None):
+    """RMSE in millimetres between two motions over the samples of ``mask`` (all if None);
+    a sample left unfilled counts as infinitely wrong."""
+    err = np.linalg.norm(filled.positions - truth.positions, axis=2)
+    err = np.where(np.isnan(err), np.inf, err)
+    if mask is not None:
+        err = err[mask]
+    return float(1000 * np.sqrt((err ** 2).mean()))
+
+
 def kb_without(kb, subject):
     """The knowledge base minus every pose from a file of ``subject``."""
     keep_sources = np.array([subject_of(s) != subject for s in kb.sources])
@@ -121,8 +136,6 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
     done = 0
     for test in tests:
         truth = read_motion(test, skip_frames=skip_frames)
-        from .kb import resample
-
         truth = truth.replace(positions=resample(truth.positions, truth.fps, fps), fps=fps,
                               filled=None)
         common = [n for n in truth.names if n in full_kb.names]
@@ -134,18 +147,16 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
         for label, setting in chosen:
             rng = np.random.default_rng([seed, *label.encode()])
             miss = punch_gaps(truth.n_frames, truth.n_points, protocol, setting, rng, truth.names)
-            query = truth.replace(positions=np.where(miss[..., None], np.nan, truth.positions))
+            query = with_gaps(truth, miss)
             for method in methods:
                 start = time.perf_counter()
                 out = fill(query, method, kb=kb,
                            settings=KnnSettings(k=None if k is None else min(k, kb.size)))
                 seconds = time.perf_counter() - start
-                err = np.linalg.norm(out.positions - truth.positions, axis=2)
-                err = np.where(np.isnan(err), np.inf, err)
                 results.append({
                     "method": method, "setting": label, "test": Path(test).name,
-                    "rmse_missing_mm": float(1000 * np.sqrt((err[miss] ** 2).mean())),
-                    "rmse_all_mm": float(1000 * np.sqrt((err ** 2).mean())),
+                    "rmse_missing_mm": rmse_mm(out, truth, miss),
+                    "rmse_all_mm": rmse_mm(out, truth),
                     "seconds": seconds,
                 })
                 done += 1

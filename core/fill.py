@@ -5,7 +5,6 @@ import numpy as np
 from . import baselines
 from .errors import GapFillError
 from .kb import match_names
-from .recover import KnnSettings, fill_knn
 
 METHODS = ("knn", "linear", "spline", "svt", "pca", "intercorrelation")
 NEEDS_KB = ("knn", "pca")
@@ -37,6 +36,8 @@ def fill(motion, method="knn", kb=None, settings=None, progress=None, should_can
     if not motion.missing.any():
         return motion
     if method == "knn":
+        from .recover import KnnSettings, fill_knn  # scipy.optimize only when needed
+
         return fill_knn(motion, kb, settings or KnnSettings(), progress=progress,
                         should_cancel=should_cancel, report=report)
     if method == "pca":

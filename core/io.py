@@ -14,6 +14,7 @@ leaves any previous file intact, and they refuse to replace an existing file unl
 
 import os
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 from .errors import GapFillError, ParseError
@@ -92,6 +93,30 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False):
     return motion
 
 
+@contextmanager
+def atomic_output(path, overwrite=False):
+    """A temporary path beside ``path`` to write to; renamed onto ``path`` when the block ends
+    without an error, removed otherwise. Refuses an existing ``path`` unless ``overwrite``.
+
+    The temporary name ends with the target's suffix (ezc3d appends ``.c3d`` to names that lack
+    it).
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise GapFillError(f"{path} exists; pass overwrite (--force) to replace it")
+    if not path.parent.is_dir():
+        raise GapFillError(f"folder {path.parent} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{_suffix(path)}",
+                               dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def write_motion(motion, path, overwrite=False):
     """Write a motion to ``.c3d``, ``.npz`` or ``.csv`` (by extension), atomically.
 
@@ -105,28 +130,14 @@ def write_motion(motion, path, overwrite=False):
     if suffix not in WRITE_FORMATS:
         raise GapFillError(f"cannot write {suffix or 'files without extension'}; writable: "
                            f"{', '.join(WRITE_FORMATS)}")
-    if path.exists() and not overwrite:
-        raise GapFillError(f"{path} exists; pass overwrite (--force) to replace it")
-    if not path.parent.is_dir():
-        raise GapFillError(f"folder {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{suffix}", dir=path.parent)
-    try:
+    with atomic_output(path, overwrite) as tmp:
         if suffix == ".c3d":
             from .formats.c3d import write_c3d
 
-            os.close(fd)
-            fd = None
             write_c3d(motion, tmp)
         else:
             from .formats import tabular
 
-            with os.fdopen(fd, "wb") as handle:
-                fd = None
+            with open(tmp, "wb") as handle:
                 (tabular.write_npz if suffix == ".npz" else tabular.write_csv)(motion, handle)
-        os.replace(tmp, path)
-    except BaseException:
-        if fd is not None:
-            os.close(fd)
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return path

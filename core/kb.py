@@ -7,8 +7,6 @@ frame, ``names``, ``fps``, ``limbs``, ``sources`` (one string per source file), 
 
 import fnmatch
 import json
-import os
-import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import GapFillError, ParseError
-from .io import READ_FORMATS, read_motion
+from .io import READ_FORMATS, atomic_output, read_motion
 from .normalize import Reference, find_reference, frames_of, normalize
 
 KB_VERSION = 1
@@ -72,25 +70,15 @@ class KnowledgeBase:
 
     def save(self, path, overwrite=False):
         """Write atomically to ``path`` (``.npz``)."""
-        path = Path(path)
-        if path.exists() and not overwrite:
-            raise GapFillError(f"{path} exists; pass overwrite (--force) to replace it")
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part.npz",
-                                   dir=path.parent if str(path.parent) else ".")
-        try:
-            with os.fdopen(fd, "wb") as handle:
-                np.savez(handle, format_version=np.int64(KB_VERSION),
-                         poses=self.poses.astype(np.float32),
-                         names=np.array(self.names, dtype=str), fps=np.float64(self.fps),
-                         limbs=np.asarray(self.limbs, dtype=np.int64),
-                         sources=np.array(self.sources, dtype=str),
-                         source_index=self.source_index.astype(np.int32),
-                         reference=np.str_(json.dumps(self.reference.to_dict(self.names))))
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+        with atomic_output(path, overwrite) as tmp, open(tmp, "wb") as handle:
+            np.savez(handle, format_version=np.int64(KB_VERSION),
+                     poses=self.poses.astype(np.float32),
+                     names=np.array(self.names, dtype=str), fps=np.float64(self.fps),
+                     limbs=np.asarray(self.limbs, dtype=np.int64),
+                     sources=np.array(self.sources, dtype=str),
+                     source_index=self.source_index.astype(np.int32),
+                     reference=np.str_(json.dumps(self.reference.to_dict(self.names))))
+        return Path(path)
 
 
 def load_kb(path):

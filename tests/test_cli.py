@@ -114,7 +114,7 @@ def test_ctrl_c_stops_cleanly_and_writes_nothing(data_dir, tmp_path):
     import signal
     import time
 
-    from mocap_gapfill.core.evaluate import punch_gaps
+    from mocap_gapfill.core.evaluate import punch_gaps, with_gaps
     from mocap_gapfill.core.io import write_motion
 
     kb = tmp_path / "kb.npz"
@@ -122,8 +122,7 @@ def test_ctrl_c_stops_cleanly_and_writes_nothing(data_dir, tmp_path):
                "6", "--quiet").returncode == 0
     take = read_motion(data_dir / "cmu/bvh/daz_friendly/13/13_30.bvh.gz", skip_frames=6)
     miss = punch_gaps(take.n_frames, take.n_points, "joints", (6, 120), np.random.default_rng(0))
-    gappy = write_motion(take.replace(positions=np.where(miss[..., None], np.nan, take.positions)),
-                         tmp_path / "gappy.npz")
+    gappy = write_motion(with_gaps(take, miss), tmp_path / "gappy.npz")
     out = tmp_path / "filled.npz"
     proc = subprocess.Popen([sys.executable, "-m", "mocap_gapfill", "fill", str(gappy), "-k",
                              str(kb), "-o", str(out)], stdout=subprocess.PIPE,

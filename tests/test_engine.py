@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mocap_gapfill.core.errors import GapFillError, ParseError
-from mocap_gapfill.core.evaluate import kb_without, punch_gaps, subject_of
+from mocap_gapfill.core.evaluate import kb_without, punch_gaps, rmse_mm, subject_of, with_gaps
 from mocap_gapfill.core.fill import METHODS, fill
 from mocap_gapfill.core.io import read_motion
 from mocap_gapfill.core.kb import build_kb, load_kb, resample
@@ -101,21 +101,12 @@ def test_search_equals_the_exact_oracle(daz_kb):
         KBIndex(daz_kb.poses[:100]).search(queries, present, 101)
 
 
-def _gappy(truth, miss):
-    return truth.replace(positions=np.where(miss[..., None], np.nan, truth.positions))
-
-
-def _rmse_mm(out, truth, miss):
-    err = np.linalg.norm(out.positions - truth.positions, axis=2)
-    return 1000 * np.sqrt((err[miss] ** 2).mean())
-
-
 def test_knn_beats_every_baseline_and_keeps_observations(daz_kb, walk):
     kb = kb_without(daz_kb, subject_of("07_05"))
     assert not any(subject_of(s) == "07" for s in np.array(kb.sources)[np.unique(kb.source_index)])
     miss = punch_gaps(walk.n_frames, walk.n_points, "joints", (6, 60), np.random.default_rng(3))
-    query = _gappy(walk, miss)
-    scores = {m: _rmse_mm(fill(query, m, kb=kb), walk, miss) for m in METHODS}
+    query = with_gaps(walk, miss)
+    scores = {m: rmse_mm(fill(query, m, kb=kb), walk, miss) for m in METHODS}
     best_baseline = min(v for m, v in scores.items() if m != "knn")
     assert scores["knn"] < best_baseline, scores
     out = fill(query, "knn", kb=kb)
@@ -130,7 +121,7 @@ def test_fill_meets_the_data_at_both_ends_of_a_gap(daz_kb, walk):
     hand = walk.names.index("lHand")
     miss = np.zeros(walk.missing.shape, dtype=bool)
     miss[80:140, hand] = True
-    out = fill(_gappy(walk, miss), "knn", kb=kb).positions[:, hand]
+    out = fill(with_gaps(walk, miss), "knn", kb=kb).positions[:, hand]
     step = np.linalg.norm(np.diff(walk.positions[:, hand], axis=0), axis=1)
     jumps = np.linalg.norm(out[[80, 140]] - out[[79, 139]], axis=1)
     assert (jumps < 3 * step.max()).all()  # no jump where the fill meets the observed data
@@ -142,9 +133,9 @@ def test_gaps_at_clip_ends_and_frames_with_nothing_present(daz_kb, walk):
     miss[:40, walk.names.index("rFoot")] = True  # touches the first frame
     miss[-40:, walk.names.index("lHand")] = True  # touches the last frame
     miss[150:153] = True  # three frames with nothing at all
-    out = fill(_gappy(walk, miss), "knn", kb=kb)
+    out = fill(with_gaps(walk, miss), "knn", kb=kb)
     assert not out.missing.any()
-    assert _rmse_mm(out, walk, miss) < 120
+    assert rmse_mm(out, walk, miss) < 120
     blank = out.positions[150:153]
     lo, hi = out.positions[149], out.positions[153]
     assert np.all((blank >= np.minimum(lo, hi) - 1e-9) & (blank <= np.maximum(lo, hi) + 1e-9))
@@ -156,16 +147,16 @@ def test_a_gap_running_through_frames_with_nothing_present(daz_kb, walk):
     miss = np.zeros(walk.missing.shape, dtype=bool)
     miss[100:160, walk.names.index("lHand")] = True
     miss[150:153] = True
-    out = fill(_gappy(walk, miss), "knn", kb=kb)
+    out = fill(with_gaps(walk, miss), "knn", kb=kb)
     assert not out.missing.any()
-    assert _rmse_mm(out, walk, miss) < 120
+    assert rmse_mm(out, walk, miss) < 120
 
 
 def test_k_larger_than_the_knowledge_base(daz_kb, walk):
     miss = np.zeros(walk.missing.shape, dtype=bool)
     miss[10:20, 5] = True
     with pytest.raises(GapFillError, match="larger than the knowledge base"):
-        fill(_gappy(walk, miss), "knn", kb=daz_kb, settings=KnnSettings(k=daz_kb.size + 1))
+        fill(with_gaps(walk, miss), "knn", kb=daz_kb, settings=KnnSettings(k=daz_kb.size + 1))
 
 
 def test_unknown_method():
@@ -181,9 +172,9 @@ def test_hips_hidden_at_the_clip_end(daz_kb, walk):
     ref = kb.reference_for(walk.names)
     miss = np.zeros(walk.missing.shape, dtype=bool)
     miss[-60:, [*ref.root, *ref.left, *ref.right, walk.names.index("lHand")]] = True
-    query = _gappy(walk, miss)
-    knn = _rmse_mm(fill(query, "knn", kb=kb), walk, miss)
-    linear = _rmse_mm(fill(query, "linear"), walk, miss)
+    query = with_gaps(walk, miss)
+    knn = rmse_mm(fill(query, "knn", kb=kb), walk, miss)
+    linear = rmse_mm(fill(query, "linear"), walk, miss)
     assert knn < 40 and knn < linear / 5, (knn, linear)
 
 
