@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import GapFillError, ParseError
 from .io import READ_FORMATS, atomic_output, read_motion
-from .normalize import Reference, find_reference, frames_of, normalize
+from .normalize import find_reference, frames_of, normalize
 
 KB_VERSION = 1
 #: a cap on what a KB file may hold, checked before any array is loaded
@@ -52,7 +52,7 @@ class KnowledgeBase:
         return find_reference(self.names)
 
     def reference_for(self, names):
-        """The :class:`Reference` of a query's point set, which must orient poses by the same
+        """The :class:`~mocap_gapfill.core.normalize.Reference` of a query's point set, which must orient poses by the same
         points as this knowledge base (raises :class:`GapFillError` naming them otherwise)."""
         mine = self.reference.to_dict(self.names)
         lacking = [n for group in mine.values() for n in group if n not in names]
@@ -241,4 +241,4 @@ def match_names(kb, names):
     return common, lacking
 
 
-__all__ = ["KnowledgeBase", "build_kb", "load_kb", "match_names", "Reference", "resample"]
+__all__ = ["KnowledgeBase", "build_kb", "load_kb", "match_names", "resample"]
