@@ -1,24 +1,147 @@
-"""The "Mocap" tab of the 3D View sidebar."""
+"""The "Mocap" tab of the 3D View sidebar: import, knowledge base, gaps, fill, preview."""
 
 import bpy
 
+from . import bridge, prefs
 
-class MOCAP_GAPFILL_PT_main(bpy.types.Panel):
-    """Mocap Gap Fill"""
 
-    bl_idname = "MOCAP_GAPFILL_PT_main"
-    bl_label = "Mocap Gap Fill"
+class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
+    """Gaps of a take: point, frames, kind; filled gaps carry a check mark"""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        icons = {"MISSING": "ERROR", "SUSPECT": "QUESTION", "MARKED": "BOOKMARKS"}
+        row = layout.row(align=True)
+        row.label(text=item.point, icon=icons[item.kind])
+        row.label(text=f"{item.first}-{item.last} ({item.last - item.first + 1})")
+        row.label(text="", icon="CHECKMARK" if item.filled else "BLANK1")
+
+    def filter_items(self, context, data, propname):
+        items = getattr(data, propname)
+        flags = [self.bitflag_filter_item] * len(items)
+        if self.filter_name:
+            needle = self.filter_name.lower()
+            flags = [self.bitflag_filter_item if needle in g.point.lower() else 0 for g in items]
+        return flags, []
+
+
+class MOCAP_GAPFILL_UL_points(bpy.types.UIList):
+    """Per-point totals: gaps, missing frames and share, longest gap"""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        row = layout.row(align=True)
+        row.label(text=item.name)
+        row.label(text=f"{item.gaps} gaps")
+        row.label(text=f"{item.percent:.1f} %")
+        row.label(text=f"max {item.longest}")
+
+
+class _Panel:
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = "Mocap"
 
+
+class MOCAP_GAPFILL_PT_main(_Panel, bpy.types.Panel):
+    """Mocap Gap Fill"""
+
+    bl_idname = "MOCAP_GAPFILL_PT_main"
+    bl_label = "Mocap Gap Fill"
+
     def draw(self, context):
         layout = self.layout
-        layout.operator("mocap_gapfill.file_info", icon="FILE")
-        info = context.window_manager.mocap_gapfill_last_info
+        row = layout.row(align=True)
+        row.operator("mocap_gapfill.import_markers", text="C3D", icon="EMPTY_DATA")
+        row.operator("mocap_gapfill.import_skeleton", text="ASF/AMC", icon="ARMATURE_DATA")
+        row.operator("mocap_gapfill.file_info", text="", icon="INFO")
+        info = context.window_manager.mocap_gapfill.last_info
         if info:
             layout.label(text=info)
+        owner = bridge.take_owner(context.active_object)
+        layout.label(text=f"Take: {owner.name}" if owner else "Select an armature or marker set",
+                     icon="OUTLINER_OB_ARMATURE" if owner and owner.type == "ARMATURE"
+                     else "OUTLINER_OB_EMPTY")
 
 
-classes = (MOCAP_GAPFILL_PT_main,)
+class MOCAP_GAPFILL_PT_kb(_Panel, bpy.types.Panel):
+    bl_idname = "MOCAP_GAPFILL_PT_kb"
+    bl_label = "Knowledge Base"
+    bl_parent_id = "MOCAP_GAPFILL_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.scene.mocap_gapfill
+        row = layout.row(align=True)
+        row.prop(settings, "kb_path", text="")
+        row.operator("mocap_gapfill.load_kb", text="", icon="FILEBROWSER")
+        row = layout.row(align=True)
+        row.operator("mocap_gapfill.build_kb", text="Build from Folder",
+                     icon="NEWFOLDER").source = "FOLDER"
+        row.operator("mocap_gapfill.build_kb", text="From Take", icon="ACTION").source = "TAKE"
+        p = prefs.get(context)
+        if p and p.recent:
+            col = layout.column(align=True)
+            for item in list(p.recent)[:4]:
+                name = bpy.path.basename(item.path)
+                col.operator("mocap_gapfill.use_recent_kb", text=name, icon="FILE").path = item.path
+
+
+class MOCAP_GAPFILL_PT_gaps(_Panel, bpy.types.Panel):
+    bl_idname = "MOCAP_GAPFILL_PT_gaps"
+    bl_label = "Gaps"
+    bl_parent_id = "MOCAP_GAPFILL_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        owner = bridge.take_owner(context.active_object)
+        row = layout.row(align=True)
+        row.operator("mocap_gapfill.detect_gaps", icon="VIEWZOOM")
+        row.operator("mocap_gapfill.mark_gap", icon="BOOKMARKS")
+        if owner is None:
+            return
+        settings = owner.mocap_gapfill
+        row = layout.row()
+        row.template_list("MOCAP_GAPFILL_UL_gaps", "", settings, "gaps", settings, "gap_index",
+                          rows=6)
+        row.operator("mocap_gapfill.remove_gap", text="", icon="X")
+        layout.prop(context.scene.mocap_gapfill, "detect_suspects")
+        if len(settings.points):
+            layout.label(text=f"Points with gaps ({settings.frames} frames):")
+            layout.template_list("MOCAP_GAPFILL_UL_points", "", settings, "points", settings,
+                                 "point_index", rows=3)
+        layout.prop(settings, "units")
+
+
+class MOCAP_GAPFILL_PT_fill(_Panel, bpy.types.Panel):
+    bl_idname = "MOCAP_GAPFILL_PT_fill"
+    bl_label = "Fill"
+    bl_parent_id = "MOCAP_GAPFILL_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.scene.mocap_gapfill
+        layout.prop(settings, "method")
+        row = layout.row(align=True)
+        row.prop(settings, "k")
+        row.prop(settings, "max_gap")
+        job = context.window_manager.mocap_gapfill
+        if job.running:
+            if hasattr(layout, "progress"):
+                layout.progress(factor=job.progress / 100, text=job.message)
+            else:
+                layout.label(text=f"{job.progress:.0f} % {job.message}")
+            layout.label(text="Esc to cancel", icon="CANCEL")
+            return
+        row = layout.row(align=True)
+        row.operator("mocap_gapfill.fill_gaps", text="Fill Selected Gap").scope = "SELECTED"
+        row.operator("mocap_gapfill.fill_gaps", text="Fill All Gaps", icon="MOD_SMOOTH").scope = "ALL"
+        owner = bridge.take_owner(context.active_object)
+        if owner is not None and owner.mocap_gapfill.recovered_action is not None:
+            box = layout.box()
+            box.label(text="Preview")
+            box.row().prop(owner.mocap_gapfill, "showing", expand=True)
+            box.operator("mocap_gapfill.ghost", icon="GHOST_ENABLED")
+
+
+classes = (MOCAP_GAPFILL_UL_gaps, MOCAP_GAPFILL_UL_points, MOCAP_GAPFILL_PT_main,
+           MOCAP_GAPFILL_PT_kb, MOCAP_GAPFILL_PT_gaps, MOCAP_GAPFILL_PT_fill)
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -186,7 +186,6 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
     files = motion_files(sources, exclude)
     if not files:
         raise GapFillError("no motion files in the knowledge-base sources")
-    report = report or (lambda message: None)
     motions = []
     for i, path in enumerate(files):
         if should_cancel and should_cancel():
@@ -194,6 +193,20 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
         if progress:
             progress(i / len(files), f"reading {path.name}")
         motions.append(read_motion(path, skip_frames=skip_frames, **(read_options or {})))
+    kb = kb_from_motions(motions, fps, stride, report)
+    if progress:
+        progress(1.0, "done")
+    return kb
+
+
+def kb_from_motions(motions, fps=None, stride=1, report=None):
+    """Build a :class:`KnowledgeBase` from :class:`Motion` objects (see :func:`build_kb`).
+
+    Only points present in every motion are kept; frames with any of them missing are dropped.
+    """
+    report = report or (lambda message: None)
+    if not motions:
+        raise GapFillError("no motions for the knowledge base")
     names = [n for n in motions[0].names if all(n in m.names for m in motions[1:])]
     dropped = sorted({n for m in motions for n in m.names} - set(names))
     if dropped:
@@ -210,18 +223,17 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
         complete = ~np.isnan(pos).any(axis=(1, 2))
         pos = pos[complete]
         if not len(pos):
-            report(f"{files[i].name}: no complete frame, skipped")
+            report(f"{motion.source or f'motion {i}'}: no complete frame, skipped")
             continue
         root, angle = frames_of(pos, reference)
         poses.append(normalize(pos, root, angle).astype(np.float32))
         index.append(np.full(len(pos), i, dtype=np.int32))
     if not poses:
         raise GapFillError("no complete poses in the knowledge-base sources")
-    if progress:
-        progress(1.0, "done")
     limbs = motions[0].select(names).limbs
     return KnowledgeBase(np.concatenate(poses), tuple(names), fps, limbs,
-                         tuple(str(f) for f in files), np.concatenate(index))
+                         tuple(str(m.source or f"motion {i}") for i, m in enumerate(motions)),
+                         np.concatenate(index))
 
 
 def match_names(kb, names):
@@ -241,4 +253,4 @@ def match_names(kb, names):
     return common, lacking
 
 
-__all__ = ["KnowledgeBase", "build_kb", "load_kb", "match_names", "resample"]
+__all__ = ["KnowledgeBase", "build_kb", "kb_from_motions", "load_kb", "match_names", "resample"]

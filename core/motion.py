@@ -222,6 +222,16 @@ def interpolate_rows(values, valid):
     return out.reshape(values.shape)
 
 
+def units_for_height(height):
+    """The unit (a key of :data:`UNIT_SCALES`) in which a person ``height`` tall is ~1.7 m.
+
+    >>> units_for_height(170.0), units_for_height(1.75), units_for_height(31.0)
+    ('cm', 'm', 'cmu')
+    """
+    height = float(height) if np.isfinite(height) and height > 0 else 1.7
+    return min(UNIT_SCALES, key=lambda u: abs(np.log(height * UNIT_SCALES[u] / 1.7)))
+
+
 def snap_fps(fps):
     """Round a frame rate read from a truncated frame time (``.0083333`` -> 120) to an integer.
 

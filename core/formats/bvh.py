@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ParseError
-from ..motion import UNIT_SCALES, Motion, skeleton_limbs, snap_fps, y_up_to_z_up
+from ..motion import UNIT_SCALES, Motion, skeleton_limbs, snap_fps, units_for_height, y_up_to_z_up
 from .kinematics import compose
 
 _ROT = {"Xrotation": "x", "Yrotation": "y", "Zrotation": "z"}
@@ -230,8 +230,7 @@ def guess_units(bvh):
     rest = np.zeros((len(bvh.joints), 3))
     for j, joint in enumerate(bvh.joints):
         rest[j] = joint.offset + (rest[joint.parent] if joint.parent >= 0 else 0)
-    height = float(np.ptp(rest[:, 1])) or float(np.ptp(rest)) or 1.0
-    return min(UNIT_SCALES, key=lambda u: abs(np.log(height * UNIT_SCALES[u] / 1.7)))
+    return units_for_height(float(np.ptp(rest[:, 1])) or float(np.ptp(rest)))
 
 
 def read_bvh(path, units=None, skip_frames=0, end_sites=False):

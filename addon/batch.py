@@ -1,0 +1,126 @@
+"""Headless batch cleanup: detect and fill every gap of a .blend file's takes, save a new file.
+
+- ``blender -b scene.blend -c mocap_gapfill --kb KB.npz [--objects A B] [--output OUT.blend]``
+  (registered with ``bpy.utils.register_cli_command``);
+- ``mocap-gapfill blend SCENE.blend --kb KB.npz -o OUT.blend``: the same through the bpy module.
+
+The input file is never overwritten unless ``--overwrite`` is given.
+"""
+
+import argparse
+from pathlib import Path
+
+import bpy
+
+from ..core.errors import GapFillError
+from ..core.fill import NEEDS_KB
+from . import gaps
+
+_cli = None
+
+
+def add_arguments(parser, with_input=False):
+    if with_input:
+        parser.add_argument("blend", help="the .blend file to clean")
+    parser.add_argument("--kb", "-k", help="knowledge-base file (.npz)")
+    parser.add_argument("--objects", nargs="+", default=None,
+                        help="armatures / marker-set empties to fill (default: every take)")
+    parser.add_argument("--output", "-o", help="where to save (default: <input>_filled.blend)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="allow saving over the input or an existing output")
+    parser.add_argument("--method", default="knn",
+                        choices=("knn", "linear", "spline", "intercorrelation", "pca"))
+    parser.add_argument("-K", type=int, default=0, help="neighbours per frame (0: automatic)")
+    parser.add_argument("--max-gap", type=int, default=0, help="leave longer gaps unfilled")
+    parser.add_argument("--no-suspects", action="store_true",
+                        help="do not treat jumping or stretching keys as gaps")
+
+
+def output_path(source, output, overwrite):
+    """Where to save: never the input, nor an existing file, unless ``overwrite``."""
+    source = Path(source).resolve() if source else None
+    if output:
+        out = Path(output).resolve()
+    elif source:
+        out = source.with_name(source.stem + "_filled.blend")
+    else:
+        raise GapFillError("the scene was never saved: give --output")
+    if not overwrite and (out == source or out.exists()):
+        raise GapFillError(f"{out} exists (or is the input); pass --overwrite to replace it")
+    return out
+
+
+def run(args, report=print):
+    """Detect and fill the gaps of the open file's takes and save; returns the output path."""
+    context = bpy.context
+    scene = context.scene
+    out = output_path(bpy.data.filepath, args.output, args.overwrite)
+    kb = None
+    if args.method in NEEDS_KB:
+        if not args.kb:
+            raise GapFillError(f"method {args.method!r} needs a knowledge base: --kb KB.npz")
+        kb = gaps.load_kb_cached(args.kb)
+    owners = (gaps.takes_in(context, args.objects) if args.objects else gaps.all_takes(scene))
+    if not owners:
+        raise GapFillError("no armature or marker set in this file")
+    for owner in owners:
+        gaps.detect(owner, scene, suspects=not args.no_suspects)
+        report(f"{owner.name}: {len(owner.mocap_gapfill.gaps)} gaps")
+    owners = [o for o in owners if len(o.mocap_gapfill.gaps)]
+    if owners:
+        plans, work = gaps.plan_fill(context, owners, False, args.method, args.K, args.max_gap, kb)
+
+        def progress(fraction, message):
+            report(f"{100 * fraction:3.0f} % {message}")
+
+        written = gaps.apply_fill(context, plans, work(progress, lambda: False))
+        report(f"filled {written} samples")
+    bpy.ops.wm.save_as_mainfile(filepath=str(out), copy=True)
+    report(f"saved {out}")
+    return out
+
+
+def cli_command(argv):
+    """``blender -b scene.blend -c mocap_gapfill ...``; returns the exit code."""
+    parser = argparse.ArgumentParser(prog="blender -b FILE.blend -c mocap_gapfill",
+                                     description=__doc__.split("\n\n")[0])
+    add_arguments(parser)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return exc.code or 0
+    try:
+        run(args)
+    except (GapFillError, ValueError, OSError) as exc:
+        print(f"mocap_gapfill: error: {exc}")
+        return 1
+    return 0
+
+
+def blend_main(args, report=print):
+    """``mocap-gapfill blend``: open the file in the bpy module, register the add-on, run."""
+    source = Path(args.blend)
+    if not source.is_file():
+        raise GapFillError(f"no such file: {source}")
+    args.output = str(output_path(source, args.output, args.overwrite))
+    bpy.ops.wm.open_mainfile(filepath=str(source), load_ui=False)
+    from . import register as register_addon, unregister as unregister_addon
+
+    register_addon()
+    try:
+        return run(args, report)
+    finally:
+        unregister_addon()
+
+
+def register():
+    global _cli
+    if hasattr(bpy.utils, "register_cli_command"):
+        _cli = bpy.utils.register_cli_command("mocap_gapfill", cli_command)
+
+
+def unregister():
+    global _cli
+    if _cli is not None:
+        bpy.utils.unregister_cli_command(_cli)
+        _cli = None

@@ -1,0 +1,517 @@
+"""The one module that turns Blender data into arrays for the core, and arrays back into keys.
+
+Two kinds of "take" live in a scene:
+
+- a **marker set**: an empty whose child empties carry location keys, one per marker (what
+  :func:`import_markers` makes from a C3D). A frame without a key is a missing sample.
+- an **armature**: joint positions are the bone heads. A bone without keys on a frame has an
+  unknown rotation, so the joints below it are missing (:func:`..core.posing.points_missing`).
+
+Positions go to the core in metres, Z up, world space (:func:`to_metres` gives the scale of an
+object's units). Keys are read and written with ``foreach_get`` / ``foreach_set`` on numpy
+buffers. Recovered keys never go into the original action: :func:`recovered_action` makes a
+copy once and the object plays it; the original stays on the object's settings for preview.
+"""
+
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from ..core.motion import UNIT_SCALES, Motion, rigid_marker_pairs, skeleton_limbs, units_for_height
+from ..core.posing import forward, points_missing, solve_pose
+from . import compat
+
+MARKER_SET = "mocap_gapfill_marker_set"  # custom property on the parent empty of a marker set
+ROTATION_PATHS = {"QUATERNION": ("rotation_quaternion", 4), "AXIS_ANGLE": ("rotation_axis_angle", 4)}
+
+
+# ---- keys --------------------------------------------------------------------------------------
+def curve_keys(curve):
+    """``(frames, values)`` of an F-curve's keys as float arrays."""
+    co = np.empty(2 * len(curve.keyframe_points), dtype=np.float32)
+    curve.keyframe_points.foreach_get("co", co)
+    return co[0::2].astype(np.float64), co[1::2].astype(np.float64)
+
+
+def set_keys(curves, data_path, index, frames, values, group, key_type="GENERATED"):
+    """Add keys to a channel (made if needed), replacing keys on the same frames; new keys get
+    ``key_type`` so filled keys stand out in the Dope Sheet and Graph Editor."""
+    curve = curves.find(data_path, index=index) or compat.new_fcurve(curves, data_path, index,
+                                                                       group)
+    old_frames, old_values = curve_keys(curve)
+    keep = ~np.isin(np.round(old_frames), np.round(frames))
+    old_types = np.empty(len(old_frames), dtype=np.int32)
+    if len(old_frames):
+        curve.keyframe_points.foreach_get("type", old_types)
+    frames_all = np.concatenate([old_frames[keep], frames])
+    values_all = np.concatenate([old_values[keep], values])
+    types = np.concatenate([old_types[keep],
+                            np.full(len(frames), compat.KEY_TYPES[key_type], dtype=np.int32)])
+    order = np.argsort(frames_all, kind="stable")
+    curve.keyframe_points.clear()
+    curve.keyframe_points.add(len(order))
+    co = np.empty(2 * len(order), dtype=np.float32)
+    co[0::2], co[1::2] = frames_all[order], values_all[order]
+    curve.keyframe_points.foreach_set("co", co)
+    curve.keyframe_points.foreach_set("type", types[order])
+    curve.keyframe_points.foreach_set("interpolation", np.zeros(len(order), dtype=np.int32))
+    curve.update()
+    return curve
+
+
+def _keyed_frames(curves, data_path, count):
+    frames = set()
+    for i in range(count):
+        curve = curves.find(data_path, index=i)
+        if curve is not None:
+            frames.update(np.round(curve_keys(curve)[0]).astype(int).tolist())
+    return frames
+
+
+# ---- units ---------------------------------------------------------------------------------------
+def to_metres(units, height):
+    """Metres per Blender unit: ``units`` is a key of UNIT_SCALES or "AUTO" (guessed from the
+    height of the take in Blender units, a person being ~1.7 m)."""
+    key = units_for_height(height) if units == "AUTO" else units.lower()
+    return UNIT_SCALES[key]
+
+
+# ---- takes -------------------------------------------------------------------------------------
+@dataclass
+class Take:
+    """What the core needs of one object's animation, and what writing back needs."""
+
+    name: str  # the object owning the gaps
+    kind: str  # "markers" or "armature"
+    first: int  # Blender frame of row 0
+    points: tuple  # marker or bone names
+    positions: np.ndarray  # (frames, points, 3) world space, Blender units, NaN where no key
+    keyed: np.ndarray  # (frames, points) bool: a key (markers) / a rotation or location key (bones)
+    fps: float
+    metres: float  # metres per Blender unit
+    world: np.ndarray  # (4, 4) object space -> world space
+    parents: tuple = None
+    extra: dict = field(default_factory=dict)
+
+    def motion(self, missing):
+        """A core :class:`Motion` (metres) with ``missing`` (frames, points) samples removed."""
+        pos = self.positions * self.metres
+        pos[missing] = np.nan
+        if self.kind == "armature":
+            limbs = skeleton_limbs(self.parents)
+        else:
+            limbs = rigid_marker_pairs(self.positions * self.metres)
+        return Motion(pos, self.points, self.fps, parents=self.parents, limbs=limbs,
+                      source=self.name, source_format="blender")
+
+
+def scene_fps(scene):
+    return scene.render.fps / scene.render.fps_base
+
+
+def is_marker_set(obj):
+    return obj is not None and obj.type == "EMPTY" and bool(obj.get(MARKER_SET))
+
+
+def take_owner(obj):
+    """The object that owns the gaps of ``obj``: an armature, or the marker-set empty of a marker."""
+    if obj is None:
+        return None
+    if obj.type == "ARMATURE" or is_marker_set(obj):
+        return obj
+    if obj.parent is not None and is_marker_set(obj.parent):
+        return obj.parent
+    return None
+
+
+def markers_of(root):
+    """The marker empties of a marker set, in name order."""
+    return sorted((c for c in root.children if c.type == "EMPTY"), key=lambda c: c.name)
+
+
+def _matrix(m):
+    return np.array(m, dtype=np.float64)
+
+
+def read_markers(root, scene):
+    """A marker set's location keys as a :class:`Take` (parent space -> world space)."""
+    children = markers_of(root)
+    keys = []
+    for child in children:
+        curves = compat.fcurves(child)
+        per_axis = [curves and curves.find("location", index=i) for i in range(3)]
+        if curves is None or any(c is None for c in per_axis):
+            keys.append((np.zeros(0, dtype=int), np.zeros((0, 3))))
+            continue
+        frames = np.round(curve_keys(per_axis[0])[0]).astype(int)
+        values = np.stack([[c.evaluate(f) for f in frames] if i else curve_keys(c)[1]
+                           for i, c in enumerate(per_axis)], axis=1)
+        keys.append((frames, values))
+    all_frames = np.concatenate([k[0] for k in keys]) if keys else np.zeros(0, dtype=int)
+    if not len(all_frames):
+        raise ValueError(f"'{root.name}' has no marker keys")
+    first, last = int(all_frames.min()), int(all_frames.max())
+    local = np.full((last - first + 1, len(children), 3), np.nan)
+    for j, (frames, values) in enumerate(keys):
+        local[frames - first, j] = values
+    world = _matrix(root.matrix_world)
+    inverse = np.stack([_matrix(c.matrix_parent_inverse) for c in children])
+    pos = np.einsum("pij,fpj->fpi", world[:3, :3] @ inverse[:, :3, :3], local)
+    pos += (world[:3, :3] @ inverse[:, :3, 3].T).T + world[:3, 3]
+    height = np.nanmedian(np.nanmax(pos[..., 2], axis=1) - np.nanmin(pos[..., 2], axis=1))
+    units = root.mocap_gapfill.units
+    return Take(root.name, "markers", first, tuple(c.name for c in children), pos,
+                ~np.isnan(local[..., 0]), scene_fps(scene), to_metres(units, height), world,
+                extra={"inverse": inverse})
+
+
+def _matrices(collection, prop, count):
+    buf = np.empty(count * 16, dtype=np.float32)
+    collection.foreach_get(prop, buf)
+    return buf.reshape(count, 4, 4).transpose(0, 2, 1).astype(np.float64)  # column-major in RNA
+
+
+def _frame_range(obj):
+    curves = compat.fcurves(obj)
+    frames = [curve_keys(c)[0] for c in curves or ()]
+    frames = np.concatenate(frames) if frames else np.zeros(0)
+    if not len(frames):
+        raise ValueError(f"'{obj.name}' has no keys")
+    return int(np.floor(frames.min())), int(np.ceil(frames.max()))
+
+
+def read_armature(obj, scene):
+    """An armature's bone heads over its keyed range as a :class:`Take`, with what writing back
+    needs: rest matrices, the evaluated basis matrices (the twist reference inside gaps), which
+    bones have animated locations, and each bone's rotation mode."""
+    first, last = _frame_range(obj)
+    bones = obj.pose.bones
+    names = tuple(b.name for b in bones)
+    index = {n: i for i, n in enumerate(names)}
+    parents = tuple(index[b.parent.name] if b.parent else -1 for b in bones)
+    n = len(names)
+    frames = last - first + 1
+    heads = np.empty((frames, n, 3))
+    basis = np.empty((frames, n, 4, 4))
+    keep = scene.frame_current
+    buf = np.empty(n * 3, dtype=np.float32)
+    for f in range(frames):
+        scene.frame_set(first + f)
+        bones.foreach_get("head", buf)
+        heads[f] = buf.reshape(n, 3)
+        basis[f] = _matrices(bones, "matrix_basis", n)
+    scene.frame_set(keep)
+    curves = compat.fcurves(obj)
+    keyed = np.zeros((frames, n), dtype=bool)
+    moves = np.zeros(n, dtype=bool)
+    for j, b in enumerate(bones):
+        path = f'pose.bones["{bpy.utils.escape_identifier(b.name)}"]'
+        rot_path, count = ROTATION_PATHS.get(b.rotation_mode, ("rotation_euler", 3))
+        rot = _keyed_frames(curves, f"{path}.{rot_path}", count)
+        loc = _keyed_frames(curves, f"{path}.location", 3)
+        moves[j] = bool(loc) and not b.bone.use_connect
+        for f in rot | (loc if moves[j] else set()):
+            if first <= f <= last:
+                keyed[f - first, j] = True
+    world = _matrix(obj.matrix_world)
+    pos = heads @ world[:3, :3].T + world[:3, 3]
+    rest = _matrices(obj.data.bones, "matrix_local", n)
+    rest_heads = rest[:, :3, 3] @ world[:3, :3].T
+    height = float(np.ptp(rest_heads[:, 2])) if n > 1 else 0.0
+    return Take(obj.name, "armature", first, names, pos, keyed, scene_fps(scene),
+                to_metres(obj.mocap_gapfill.units, height), world, parents,
+                extra={"rest": rest, "basis": basis, "moves": moves,
+                       "modes": tuple(b.rotation_mode for b in bones)})
+
+
+def read_take(obj, scene):
+    owner = take_owner(obj)
+    if owner is None:
+        raise ValueError(f"'{obj.name}' is neither an armature nor part of a marker set")
+    return read_markers(owner, scene) if owner.type == "EMPTY" else read_armature(owner, scene)
+
+
+def missing_points(take, gap_mask):
+    """Point samples unknown under per-point gaps (markers) or per-bone gaps (armatures)."""
+    if take.kind == "armature":
+        return points_missing(gap_mask, take.parents, take.extra["moves"])
+    return gap_mask.copy()
+
+
+def unkeyed(take):
+    """Samples with no key inside the take's range: markers never keyed there, and, for bones
+    that are animated at all, frames between keys (leaf bones move no joint and are skipped)."""
+    gaps = ~take.keyed
+    if take.kind == "armature":
+        animated = take.keyed.any(axis=0)
+        has_child = np.zeros(len(take.points), dtype=bool)
+        for p in take.parents:
+            if p >= 0:
+                has_child[p] = True
+        # a bone keyed nowhere is a gap over the whole range only if its siblings are animated
+        gaps &= has_child & (animated | take.keyed.any())
+    return gaps
+
+
+# ---- actions -----------------------------------------------------------------------------------
+def original_action(obj):
+    """The action the object had before any fill (remembered on first use)."""
+    settings = obj.mocap_gapfill
+    if settings.original_action is None and obj.animation_data and obj.animation_data.action:
+        settings.original_action = obj.animation_data.action
+        settings.original_action.use_fake_user = True
+    return settings.original_action
+
+
+def recovered_action(obj):
+    """The action recovered keys go into: a copy of the original, made once and then reused.
+    The object plays it afterwards."""
+    settings = obj.mocap_gapfill
+    original = original_action(obj)
+    if settings.recovered_action is None:
+        action = original.copy()
+        action.name = original.name + ".recovered"
+        action.use_fake_user = True
+        settings.recovered_action = action
+    if obj.animation_data.action != settings.recovered_action:
+        compat.assign_action(obj, settings.recovered_action)
+    return settings.recovered_action
+
+
+def show(obj, which):
+    """Play the ``"ORIGINAL"`` or ``"RECOVERED"`` action on the object (and its markers)."""
+    targets = markers_of(obj) if is_marker_set(obj) else [obj]
+    for target in targets:
+        action = getattr(target.mocap_gapfill, f"{which.lower()}_action")
+        if action is not None:
+            compat.assign_action(target, action)
+
+
+# ---- writing back ------------------------------------------------------------------------------
+def write_markers(take, filled, mask, scene):
+    """Location keys on the filled samples of a marker set (world metres -> parent space)."""
+    root = bpy.data.objects[take.name]
+    children = {c.name: c for c in markers_of(root)}
+    world_inv = np.linalg.inv(take.world)
+    written = 0
+    for j, name in enumerate(take.points):
+        rows = np.flatnonzero(mask[:, j])
+        if not len(rows):
+            continue
+        child = children[name]
+        original_action(child)
+        recovered_action(child)
+        local_from_world = np.linalg.inv(take.extra["inverse"][j]) @ world_inv
+        p = filled[rows, j] / take.metres
+        local = p @ local_from_world[:3, :3].T + local_from_world[:3, 3]
+        curves = compat.fcurves(child, create=True)
+        for axis in range(3):
+            set_keys(curves, "location", axis, rows + take.first, local[:, axis], child.name)
+        written += len(rows)
+    return written
+
+
+def solve_armature(take, filled, bone_gaps):
+    """Basis matrices for the gap frames of an armature and the heads they give (world units).
+
+    Targets are the filled joint positions in armature space; rotations are solved where a bone
+    has a gap, locations where a moving bone has one.
+    """
+    world_inv = np.linalg.inv(take.world)
+    targets = (filled / take.metres) @ world_inv[:3, :3].T + world_inv[:3, 3]
+    moves = take.extra["moves"]
+    basis, pose = solve_pose(take.extra["rest"], take.parents, take.extra["basis"], targets,
+                             bone_gaps, bone_gaps & moves)
+    return basis, pose
+
+
+def write_armature(take, basis, bone_gaps):
+    """Rotation (and location, for moving bones) keys of the gap frames, in each bone's rotation
+    mode, continuous with the key before each gap (compatible Euler angles, quaternion signs)."""
+    from mathutils import Matrix
+
+    obj = bpy.data.objects[take.name]
+    original_action(obj)
+    recovered_action(obj)
+    curves = compat.fcurves(obj, create=True)
+    written = 0
+    for j, name in enumerate(take.points):
+        rows = np.flatnonzero(bone_gaps[:, j])
+        if not len(rows):
+            continue
+        mode = take.extra["modes"][j]
+        path = f'pose.bones["{bpy.utils.escape_identifier(name)}"]'
+        rot_path, count = ROTATION_PATHS.get(mode, ("rotation_euler", 3))
+        channels = [curves.find(f"{path}.{rot_path}", index=i) for i in range(count)]
+        values, previous = [], None
+        for k, r in enumerate(rows):
+            if k == 0 or rows[k - 1] != r - 1:  # a new run: continue from the value before it
+                frame = take.first + r - 1
+                previous = (tuple(c.evaluate(frame) for c in channels)
+                            if all(c is not None for c in channels) else None)
+            previous = _rotation_values(Matrix(basis[r, j].tolist()), mode, previous)
+            values.append(previous)
+        values = np.array(values)
+        for axis in range(count):
+            set_keys(curves, f"{path}.{rot_path}", axis, rows + take.first, values[:, axis], name)
+        if take.extra["moves"][j]:
+            for axis in range(3):
+                set_keys(curves, f"{path}.location", axis, rows + take.first,
+                         basis[rows, j, axis, 3], name)
+        written += len(rows)
+    return written
+
+
+def _rotation_values(matrix, mode, previous):
+    """Rotation of a 4x4 basis matrix as the values of a bone's rotation mode, chosen closest to
+    ``previous`` (Euler: compatible angles; quaternion: same hemisphere)."""
+    from mathutils import Euler, Quaternion
+
+    rot = matrix.to_3x3().normalized()
+    if mode == "QUATERNION":
+        q = rot.to_quaternion()
+        if previous is not None:
+            q.make_compatible(Quaternion(previous))
+        return tuple(q)
+    if mode == "AXIS_ANGLE":
+        axis, angle = rot.to_quaternion().to_axis_angle()
+        return (angle, *axis)
+    if previous is not None:
+        return tuple(rot.to_euler(mode, Euler(previous, mode)))
+    return tuple(rot.to_euler(mode))
+
+
+def forward_heads(take, basis):
+    """World-space bone heads (frames, bones, 3) that ``basis`` gives, by the same kinematics
+    Blender uses (for checks and reports)."""
+    pose = forward(take.extra["rest"], take.parents, basis)
+    heads = pose[..., :3, 3]
+    return heads @ take.world[:3, :3].T + take.world[:3, 3]
+
+
+# ---- import ------------------------------------------------------------------------------------
+def _link(context, obj, collection=None):
+    (collection or context.scene.collection).objects.link(obj)
+    return obj
+
+
+def import_markers(context, motion, name, first_frame=1):
+    """Make a marker set from a core :class:`Motion`: a parent empty and one child empty per
+    point, location keys only where the point is present (metres, Z up). Returns the parent."""
+    root = _link(context, bpy.data.objects.new(name, None))
+    root.empty_display_type = "ARROWS"
+    root[MARKER_SET] = True
+    root.mocap_gapfill.units = "M"
+    frames = np.arange(motion.n_frames) + first_frame
+    for j, label in enumerate(motion.names):
+        child = _link(context, bpy.data.objects.new(label, None))
+        child.empty_display_type = "SPHERE"
+        child.empty_display_size = 0.012
+        child.parent = root
+        present = ~motion.missing[:, j]
+        action = bpy.data.actions.new(f"{name}|{label}")
+        compat.assign_action(child, action)
+        curves = compat.fcurves(child, create=True)
+        if present.any():
+            for axis in range(3):
+                set_keys(curves, "location", axis, frames[present],
+                         motion.positions[present, j, axis], child.name, key_type="KEYFRAME")
+            child.location = motion.positions[np.flatnonzero(present)[0], j]
+    set_scene_timing(context.scene, motion.fps, first_frame, first_frame + motion.n_frames - 1)
+    return root
+
+
+def set_scene_timing(scene, fps, first, last):
+    rate = round(fps)
+    scene.render.fps = max(1, rate)
+    scene.render.fps_base = rate / fps if rate else 1.0
+    scene.frame_start, scene.frame_end = first, last
+
+
+def import_armature(context, motion, name, first_frame=1):
+    """Make an armature from a skeleton :class:`Motion` (e.g. ASF/AMC): bones from each joint to
+    its first child, rest pose = the first complete frame, root location and all rotations
+    keyed per frame so the bone heads follow the joints."""
+    complete = np.flatnonzero(~motion.missing.any(axis=1))
+    if motion.parents is None or not len(complete):
+        raise ValueError("importing as an armature needs a skeleton with a complete frame")
+    rest_pos = motion.positions[complete[0]]
+    arm = bpy.data.armatures.new(name)
+    obj = _link(context, bpy.data.objects.new(name, arm))
+    obj.mocap_gapfill.units = "M"
+    children = {j: [c for c, p in enumerate(motion.parents) if p == j]
+                for j in range(motion.n_points)}
+    previous_active = context.view_layer.objects.active
+    context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    for j, label in enumerate(motion.names):
+        bone = arm.edit_bones.new(label)
+        bone.head = rest_pos[j]
+        kids = [c for c in children[j] if np.linalg.norm(rest_pos[c] - rest_pos[j]) > 1e-4]
+        if kids:
+            tail = rest_pos[kids[0]]
+        else:
+            p = motion.parents[j]
+            direction = rest_pos[j] - rest_pos[p] if p >= 0 else np.array([0.0, 0.0, 1.0])
+            length = np.linalg.norm(direction)
+            direction = direction / length if length > 1e-6 else np.array([0.0, 0.0, 1.0])
+            tail = rest_pos[j] + 0.05 * direction
+        bone.tail = tail
+    for j, p in enumerate(motion.parents):
+        if p >= 0:
+            arm.edit_bones[j].parent = arm.edit_bones[p]
+    bpy.ops.object.mode_set(mode="OBJECT")
+    context.view_layer.objects.active = previous_active
+    for pbone in obj.pose.bones:
+        pbone.rotation_mode = "QUATERNION"
+    action = bpy.data.actions.new(name)
+    compat.assign_action(obj, action)
+    n = motion.n_points
+    rest = _matrices(arm.bones, "matrix_local", n)
+    reference = np.broadcast_to(np.eye(4), (motion.n_frames, n, 4, 4))
+    present = ~motion.missing
+    rotate = np.zeros_like(present)
+    for j in range(n):
+        rotate[:, j] = present[:, children[j]].all(axis=1) if children[j] else False
+    translate = np.zeros_like(present)
+    translate[:, [j for j, p in enumerate(motion.parents) if p < 0]] = True
+    basis, _ = solve_pose(rest, motion.parents, reference, motion.positions, rotate,
+                          translate & present)
+    take = Take(obj.name, "armature", first_frame, motion.names, motion.positions, present,
+                motion.fps, 1.0, np.eye(4), motion.parents,
+                extra={"rest": rest, "basis": reference, "moves": translate.any(axis=0),
+                       "modes": tuple("QUATERNION" for _ in range(n))})
+    _write_all(take, basis, rotate | (translate & present))
+    set_scene_timing(context.scene, motion.fps, first_frame, first_frame + motion.n_frames - 1)
+    return obj
+
+
+def _write_all(take, basis, rows_mask):
+    """Keys straight into the object's current action (import), typed as ordinary keyframes."""
+    obj = bpy.data.objects[take.name]
+    curves = compat.fcurves(obj, create=True)
+    for j, name in enumerate(take.points):
+        rows = np.flatnonzero(rows_mask[:, j])
+        if not len(rows):
+            continue
+        path = f'pose.bones["{bpy.utils.escape_identifier(name)}"]'
+        q = _quaternions(basis[rows, j, :3, :3])
+        for axis in range(4):
+            set_keys(curves, f"{path}.rotation_quaternion", axis, rows + take.first, q[:, axis],
+                     name, key_type="KEYFRAME")
+        if take.extra["moves"][j]:
+            for axis in range(3):
+                set_keys(curves, f"{path}.location", axis, rows + take.first,
+                         basis[rows, j, axis, 3], name, key_type="KEYFRAME")
+
+
+def _quaternions(rot):
+    """(w, x, y, z) of rotation matrices, sign-continuous along the first axis."""
+    from scipy.spatial.transform import Rotation
+
+    xyzw = Rotation.from_matrix(rot).as_quat()
+    q = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+    flip = np.cumsum(np.r_[0, np.sum(q[1:] * q[:-1], axis=1) < 0]) % 2 == 1
+    q[flip] *= -1
+    return q

@@ -1,0 +1,229 @@
+"""Gap lists of takes and the fill, between the operators / batch command and the bridge.
+
+Everything here runs on the main thread except the ``work`` closure :func:`plan_fill` returns,
+which only sees arrays.
+"""
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.errors import GapFillError
+from ..core.motion import gap_runs
+from ..core.posing import bones_to_blame
+from ..core.suspect import find_suspects
+from . import bridge, prefs
+
+_KB_CACHE = {}
+
+
+def takes_in(context, names=None):
+    """The takes (armatures and marker sets) named, or else those of the selected objects, or
+    else of the active object."""
+    scene = context.scene
+    if names:
+        found = [scene.objects.get(n) for n in names]
+        unknown = [n for n, o in zip(names, found) if o is None]
+        if unknown:
+            raise GapFillError(f"no object named {', '.join(unknown)} in scene '{scene.name}'")
+        objects = found
+    else:
+        objects = list(context.selected_objects) or [context.active_object]
+    owners = []
+    for obj in objects:
+        owner = bridge.take_owner(obj)
+        if owner is not None and owner not in owners:
+            owners.append(owner)
+    return owners
+
+
+def all_takes(scene):
+    return [o for o in scene.objects if bridge.take_owner(o) is o]
+
+
+def read_original(owner, scene):
+    """The take as recorded: read with the original actions playing, whatever is shown."""
+    settings = owner.mocap_gapfill
+    showing = settings.showing
+    if showing != "ORIGINAL":
+        bridge.show(owner, "ORIGINAL")
+    try:
+        return bridge.read_take(owner, scene)
+    finally:
+        if showing != "ORIGINAL":
+            bridge.show(owner, showing)
+
+
+def detect(owner, scene, suspects=True, jump_factor=8.0):
+    """Replace the detected gaps of a take (keeping gaps marked by hand); returns the take."""
+    take = read_original(owner, scene)
+    missing = bridge.unkeyed(take)
+    suspect = np.zeros_like(missing)
+    if suspects:
+        motion = take.motion(bridge.missing_points(take, missing))
+        flagged = find_suspects(motion.positions, motion.fps, motion.limbs,
+                                jump_factor=jump_factor)
+        if take.kind == "armature":
+            flagged = bones_to_blame(flagged, take.parents, take.extra["moves"])
+        suspect = flagged & ~missing
+    settings = owner.mocap_gapfill
+    marked = [(g.point, g.first, g.last, g.kind, g.filled) for g in settings.gaps
+              if g.kind == "MARKED"]
+    settings.gaps.clear()
+    for kind, mask in (("MISSING", missing), ("SUSPECT", suspect)):
+        for j, a, b in gap_runs(mask):
+            _add_gap(settings, take.points[j], take.first + a, take.first + b, kind)
+    for point, first, last, kind, filled in marked:
+        _add_gap(settings, point, first, last, kind).filled = filled
+    settings.gap_index = -1 if not len(settings.gaps) else min(settings.gap_index, 0)
+    update_stats(owner, take.points, take.first, take.positions.shape[0])
+    return take
+
+
+def _add_gap(settings, point, first, last, kind):
+    gap = settings.gaps.add()
+    gap.point, gap.first, gap.last, gap.kind = point, int(first), int(last), kind
+    return gap
+
+
+def mark(owner, points, first, last):
+    """Add hand-marked gaps on ``points`` over ``first..last`` (inclusive)."""
+    if last < first:
+        raise GapFillError(f"empty frame range {first}..{last}")
+    settings = owner.mocap_gapfill
+    for point in points:
+        _add_gap(settings, point, first, last, "MARKED")
+    settings.gap_index = len(settings.gaps) - 1
+
+
+def update_stats(owner, points, first, frames):
+    """Per-point totals (gaps, frames, percentage, longest) of a take's gap list."""
+    settings = owner.mocap_gapfill
+    mask = gap_mask(settings.gaps, points, first, frames)
+    settings.points.clear()
+    settings.frames = frames
+    for j, name in enumerate(points):
+        runs = gap_runs(mask[:, j:j + 1])
+        if not runs:
+            continue
+        item = settings.points.add()
+        item.name = name
+        item.gaps = len(runs)
+        item.frames = int(mask[:, j].sum())
+        item.percent = 100.0 * item.frames / max(frames, 1)
+        item.longest = max(b - a + 1 for _, a, b in runs)
+
+
+def gap_mask(gaps, points, first, frames, max_gap=0):
+    """(frames, points) mask of the listed gaps inside the take's range (gaps longer than
+    ``max_gap`` frames left out when it is > 0)."""
+    index = {n: j for j, n in enumerate(points)}
+    mask = np.zeros((frames, len(points)), dtype=bool)
+    for gap in gaps:
+        j = index.get(gap.point)
+        if j is None or (max_gap and gap.last - gap.first + 1 > max_gap):
+            continue
+        a, b = max(gap.first - first, 0), min(gap.last - first, frames - 1)
+        if a <= b:
+            mask[a:b + 1, j] = True
+    return mask
+
+
+def load_kb_cached(path):
+    from ..core.kb import load_kb
+
+    path = os.path.abspath(path)
+    stamp = os.stat(path).st_mtime_ns if os.path.isfile(path) else None
+    cached = _KB_CACHE.get(path)
+    if cached is None or cached[0] != stamp:
+        _KB_CACHE.clear()
+        _KB_CACHE[path] = (stamp, load_kb(path))
+    return _KB_CACHE[path][1]
+
+
+def kb_path(context):
+    import bpy
+
+    path = bpy.path.abspath(context.scene.mocap_gapfill.kb_path) if context.scene.mocap_gapfill.kb_path else ""
+    if not path:
+        p = prefs.get(context)
+        path = bpy.path.abspath(p.default_kb) if p and p.default_kb else ""
+    return path
+
+
+@dataclass
+class FillPlan:
+    owner: str
+    take: object
+    write: np.ndarray  # (frames, points) samples (markers) or bone frames (armature) to write
+    missing: np.ndarray  # (frames, points) point samples unknown to the core
+    gap_ids: list  # indices into the owner's gap list that this fill covers
+
+
+def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, kb=None):
+    """Read the takes and return ``(plans, work)``: ``work(progress, should_cancel)`` fills them
+    on plain arrays and returns per plan the filled positions (and, for armatures, the solved
+    basis matrices)."""
+    from ..core.fill import NEEDS_KB, fill
+    from ..core.recover import KnnSettings
+
+    if method in NEEDS_KB and kb is None:
+        raise GapFillError("choose a knowledge base first (Mocap tab > Knowledge base)")
+    plans = []
+    for owner in owners:
+        settings = owner.mocap_gapfill
+        if not len(settings.gaps):
+            continue
+        take = read_original(owner, context.scene)
+        frames = take.positions.shape[0]
+        chosen = [settings.gaps[settings.gap_index]] if only_active else list(settings.gaps)
+        if only_active and not 0 <= settings.gap_index < len(settings.gaps):
+            raise GapFillError(f"'{owner.name}': select a gap in the list first")
+        ids = [i for i, g in enumerate(settings.gaps) if g in chosen]
+        write = gap_mask(chosen, take.points, take.first, frames, max_gap)
+        every = gap_mask(settings.gaps, take.points, take.first, frames) | bridge.unkeyed(take)
+        missing = bridge.missing_points(take, every)
+        if take.kind == "markers":
+            write &= missing
+        plans.append(FillPlan(owner.name, take, write, missing, ids))
+    if not plans:
+        raise GapFillError("no gaps to fill: detect or mark gaps first")
+    knn = KnnSettings(k=k or None)
+
+    def work(progress, should_cancel):
+        results = []
+        for i, plan in enumerate(plans):
+            def step(fraction, message, i=i):
+                progress((i + fraction) / len(plans), f"{plan.owner}: {message}")
+
+            motion = plan.take.motion(plan.missing)
+            filled = fill(motion, method, kb=kb, settings=knn, progress=step,
+                          should_cancel=should_cancel).positions
+            basis = None
+            if plan.take.kind == "armature":
+                basis, _ = bridge.solve_armature(plan.take, filled, plan.write)
+            results.append((filled, basis))
+        progress(1.0, "writing keys")
+        return results
+
+    return plans, work
+
+
+def apply_fill(context, plans, results):
+    """Write the recovered keys (main thread, one step) and show the recovered actions."""
+    import bpy
+
+    written = 0
+    for plan, (filled, basis) in zip(plans, results):
+        owner = bpy.data.objects[plan.owner]
+        if plan.take.kind == "markers":
+            ok = plan.write & np.isfinite(filled[..., 0])
+            written += bridge.write_markers(plan.take, filled, ok, context.scene)
+        else:
+            written += bridge.write_armature(plan.take, basis, plan.write)
+        settings = owner.mocap_gapfill
+        for i in plan.gap_ids:
+            settings.gaps[i].filled = True
+        settings.showing = "RECOVERED"
+    return written
