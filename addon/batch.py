@@ -15,25 +15,9 @@ import bpy
 from ..core.errors import GapFillError
 from ..core.fill import NEEDS_KB
 from . import gaps
+from .commands import add_arguments
 
 _cli = None
-
-
-def add_arguments(parser, with_input=False):
-    if with_input:
-        parser.add_argument("blend", help="the .blend file to clean")
-    parser.add_argument("--kb", "-k", help="knowledge-base file (.npz)")
-    parser.add_argument("--objects", nargs="+", default=None,
-                        help="armatures / marker-set empties to fill (default: every take)")
-    parser.add_argument("--output", "-o", help="where to save (default: <input>_filled.blend)")
-    parser.add_argument("--overwrite", action="store_true",
-                        help="allow saving over the input or an existing output")
-    parser.add_argument("--method", default="knn",
-                        choices=("knn", "linear", "spline", "intercorrelation", "pca"))
-    parser.add_argument("-K", type=int, default=0, help="neighbours per frame (0: automatic)")
-    parser.add_argument("--max-gap", type=int, default=0, help="leave longer gaps unfilled")
-    parser.add_argument("--no-suspects", action="store_true",
-                        help="do not treat jumping or stretching keys as gaps")
 
 
 def output_path(source, output, overwrite):

@@ -86,8 +86,9 @@ class MOCAP_GAPFILL_PG_scene(bpy.types.PropertyGroup):
     detect_suspects: BoolProperty(name="Detect suspect data", default=True,
                                   description="Also flag keys that jump or stretch a limb")
     jump_factor: FloatProperty(name="Jump factor", default=8.0, min=2.0,
-                               description="A step faster than this many times the point's "
-                               "median speed (and over 5 m/s) is a jump")
+                               description="A key further than this many times the point's "
+                               "usual distance (and over 3 cm) from the midpoint of its "
+                               "neighbouring frames is a jump")
 
 
 class MOCAP_GAPFILL_PG_job(bpy.types.PropertyGroup):

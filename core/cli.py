@@ -189,14 +189,11 @@ def cmd_evaluate(args):
 def cmd_demo(args):
     from .demo import run_demo
 
-    progress = Progress(args.quiet)
-    run_demo(args.outdir, data=args.data, progress=progress,
-             report=lambda m: (progress.done(), print(m)))
-    progress.done()
+    run_demo(args.outdir)
     return 0
 
 
-def build_parser():
+def build_parser(extra=None):
     parser = argparse.ArgumentParser(
         prog="mocap-gapfill",
         description="Fill gaps in motion capture from a knowledge base of clean motion.")
@@ -264,16 +261,18 @@ def build_parser():
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_evaluate)
 
-    p = sub.add_parser("demo", help="fill a real take with gaps and show accuracy on known truth")
+    p = sub.add_parser("demo", help="fill synthetic takes with gaps (offline) and show the "
+                                    "accuracy on known truth")
     p.add_argument("outdir", nargs="?", default="out", help="where to write (default: out)")
-    p.add_argument("--data", help="the shared data folder (default: ../shared/data)")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_demo)
+    if extra is not None:
+        extra(sub)
     return parser
 
 
-def main(argv=None):
-    args = build_parser().parse_args(argv)
+def main(argv=None, extra=None):
+    """Run the command line; ``extra(subparsers)`` may add commands (the add-on's)."""
+    args = build_parser(extra).parse_args(argv)
     try:
         return args.func(args)
     except GapFillError as exc:

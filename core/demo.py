@@ -1,55 +1,131 @@
-"""``mocap-gapfill demo``: the main job on a built-in default.
+"""``mocap-gapfill demo``: the main job on a built-in default, offline.
 
-1. Fill the real gaps of CMU take 01_01 (C3D, 2.4 % of samples missing) from a knowledge base of
-   the other CMU C3D takes, and write the result.
-2. Show the accuracy on known truth: punch 20 % gaps (60-frame intervals) into CMU 85_02 (jump
-   turn, complete), fill them with every method, print RMSE against the original.
+Motion made by this project's own code (:mod:`.synth`): six walking/jogging/turning takes form
+two tiny knowledge bases (skeleton joints and markers); a seventh take, in a gait none of them
+has, gets gaps: three bones lose their keys over 60-100 frames (one at the clip's end) and six
+markers vanish over 70-90 frames (one at the clip's start). The gaps are filled with the
+knowledge-base method and, for comparison, linear and spline interpolation; the RMSE against the
+known truth is printed and a plot of original vs recovered trajectories is written.
+The add-on's command line adds the Blender scenes (see ``addon/commands.py``).
 """
 
-import os
 from pathlib import Path
 
 import numpy as np
 
-from .errors import GapFillError
-from .evaluate import punch_gaps, rmse_mm, with_gaps
+from . import synth
+from .evaluate import rmse_mm
 from .fill import fill
-from .io import read_motion, write_motion
-from .kb import build_kb
+from .io import write_motion
+from .kb import kb_from_motions
+from .motion import gap_runs
+from .posing import points_missing
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+FPS = 60.0
+FRAMES = 360
+#: (bone, first, last) rows whose keys are removed (0-based frames)
+BONE_GAPS = (("LeftForeArm", 60, 159), ("RightLeg", 120, 199), ("Spine1", 300, 359))
+#: (marker, first, last) samples removed
+MARKER_GAPS = (("LELB", 40, 129), ("LWRA", 90, 169), ("RKNE", 150, 229), ("RANK", 170, 249),
+               ("RTOE", 200, 279), ("LFHD", 0, 69))
+COMPARE = ("knn", "linear", "spline")
 
 
-def run_demo(outdir="out", data=None, progress=None, report=print):
-    data = Path(data or os.environ.get("MOCAP_GAPFILL_DATA", DEFAULT_DATA))
-    c3d = data / "cmu" / "c3d"
-    if not (c3d / "01_01.c3d").is_file():
-        raise GapFillError(f"the demo reads CMU C3D takes from {c3d}; set MOCAP_GAPFILL_DATA")
+def demo_takes():
+    """Knowledge-base motions and the test take: ``(kb_skeletons, kb_markers, skeleton,
+    markers)``, all complete."""
+    kb_sk, kb_mk = [], []
+    for i, gait in enumerate(synth.KB_GAITS):
+        sk, mk = synth.take(gait, frames=600, fps=FPS, phase=0.7 * i, name=f"kb take {i + 1}")
+        kb_sk.append(sk)
+        kb_mk.append(mk)
+    sk, mk = synth.take(synth.TEST_GAIT, frames=FRAMES, fps=FPS, name="test take")
+    return kb_sk, kb_mk, sk, mk
+
+
+def bone_gap_mask(names, gaps=BONE_GAPS, frames=FRAMES):
+    mask = np.zeros((frames, len(names)), dtype=bool)
+    for name, a, b in gaps:
+        mask[a:b + 1, names.index(name)] = True
+    return mask
+
+
+def run_demo(outdir="out", progress=None, report=print):
+    """Build the KBs, fill the test take's gaps, report errors; returns what the scenes need."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    take = read_motion(c3d / "01_01.c3d")
-    kb = build_kb([c3d / "85_02.c3d", c3d / "135_02.c3d"])
-    report(f"knowledge base: {kb.size} poses of {len(kb.names)} markers from 85_02 and 135_02")
-    report(f"01_01.c3d: {take.n_frames} frames, {100 * take.missing.mean():.2f} % missing "
-           f"in {len(take.gap_runs())} gaps")
-    filled = fill(take, "knn", kb=kb, progress=progress, report=report)
-    out = write_motion(filled, outdir / "01_01_filled.c3d", overwrite=True)
-    report(f"filled {int((take.missing & ~filled.missing).sum())} samples -> {out}")
+    kb_sk, kb_mk, skeleton, markers = demo_takes()
+    kb_skeleton, kb_markers = kb_from_motions(kb_sk), kb_from_motions(kb_mk)
+    kb_skeleton.save(outdir / "kb_skeleton.npz", overwrite=True)
+    kb_markers.save(outdir / "kb_markers.npz", overwrite=True)
+    report(f"knowledge bases: {kb_skeleton.size} poses of {len(kb_skeleton.names)} joints, "
+           f"{kb_markers.size} poses of {len(kb_markers.names)} markers "
+           f"({len(synth.KB_GAITS)} synthetic takes) -> {outdir}/kb_*.npz")
 
-    truth = read_motion(c3d / "85_02.c3d")
-    truth = truth.replace(filled=None)
-    kb2 = build_kb([c3d / "01_01.c3d", c3d / "135_02.c3d"])
-    common = [n for n in truth.names if n in kb2.names]
-    truth = truth.select(common)
-    miss = punch_gaps(truth.n_frames, truth.n_points, "markers", 0.2, np.random.default_rng(0))
-    query = with_gaps(truth, miss)
-    report("85_02.c3d with 20 % of the markers removed per 60-frame interval "
-           "(knowledge base: 01_01 + 135_02):")
+    bone_gaps = bone_gap_mask(skeleton.names)
+    joint_miss = points_missing(bone_gaps, skeleton.parents, np.zeros(skeleton.n_points, bool))
+    marker_miss = bone_gap_mask(markers.names, MARKER_GAPS)
     scores = {}
-    for method in ("knn", "linear", "spline", "pca", "intercorrelation"):
-        result = fill(query, method, kb=kb2)
-        scores[method] = rmse_mm(result, truth, miss)
-        report(f"  {method:17s} RMSE over missing markers {scores[method]:7.1f} mm")
-        if method == "knn":
-            write_motion(result, outdir / "85_02_punched_filled.c3d", overwrite=True)
-    return scores
+    for label, truth, miss, kb in (("skeleton", skeleton, joint_miss, kb_skeleton),
+                                   ("markers", markers, marker_miss, kb_markers)):
+        query = truth.replace(positions=np.where(miss[..., None], np.nan, truth.positions))
+        report(f"{label}: {FRAMES} frames at {FPS:g} fps, {int(miss.sum())} of {miss.size} "
+               f"samples missing")
+        for method in COMPARE:
+            result = fill(query, method, kb=kb, progress=progress)
+            scores[(label, method)] = rmse_mm(result, truth, miss)
+            report(f"  {method:7s} RMSE over missing samples {scores[(label, method)]:7.1f} mm")
+            if method == "knn":
+                filled = result
+                if label == "markers":
+                    write_motion(result, outdir / "demo_markers_filled.c3d", overwrite=True)
+        if label == "markers":
+            plot = write_plot(outdir / "demo_markers.svg", truth, query, filled,
+                              fill(query, "linear"), "LWRA")
+            report(f"plot of original vs recovered -> {plot}")
+    return {"scores": scores, "skeleton": skeleton, "markers": markers, "bone_gaps": bone_gaps,
+            "marker_gaps": marker_miss, "kb_skeleton": outdir / "kb_skeleton.npz",
+            "kb_markers": outdir / "kb_markers.npz"}
+
+
+def write_plot(path, truth, query, recovered, linear, name, width=900, height=560):
+    """An SVG of one point's x, y, z over time: the original (truth), what was observed, the
+    knowledge-base recovery and linear interpolation; the gap frames shaded."""
+    j = truth.names.index(name)
+    t = np.arange(truth.n_frames)
+    panels = []
+    gap = np.isnan(query.positions[:, j, 0])
+    h = (height - 60) / 3
+    colours = (("original", truth, "#999999", "6,4"), ("recovered", recovered, "#d62728", ""),
+               ("linear", linear, "#1f77b4", "2,3"))
+    for axis in range(3):
+        top = 30 + axis * h
+        series = [m.positions[:, j, axis] for _, m, _, _ in colours]
+        lo = min(np.nanmin(s) for s in series)
+        hi = max(np.nanmax(s) for s in series)
+        span = (hi - lo) or 1.0
+
+        def xy(values):
+            x = 60 + t / max(truth.n_frames - 1, 1) * (width - 80)
+            y = top + h - 10 - (values - lo) / span * (h - 20)
+            return " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(x, y) if np.isfinite(b))
+
+        for _, a, b in gap_runs(gap[:, None]):
+            x0 = 60 + a / (truth.n_frames - 1) * (width - 80)
+            x1 = 60 + b / (truth.n_frames - 1) * (width - 80)
+            panels.append(f'<rect x="{x0:.1f}" y="{top:.1f}" width="{max(x1 - x0, 1):.1f}" '
+                          f'height="{h - 5:.1f}" fill="#fde8c8"/>')
+        for (label, _, colour, dash), values in zip(colours, series):
+            panels.append(f'<polyline fill="none" stroke="{colour}" stroke-width="1.5" '
+                          f'stroke-dasharray="{dash}" points="{xy(values)}"/>')
+        panels.append(f'<text x="8" y="{top + h / 2:.1f}" font-size="13">{"xyz"[axis]} (m)'
+                      f'</text>')
+    legend = "".join(f'<text x="{80 + 170 * i}" y="18" font-size="13" fill="{c}">&#9473; {label}'
+                     f'</text>' for i, (label, _, c, _) in enumerate(colours))
+    svg = (f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+           f'font-family="sans-serif"><rect width="100%" height="100%" fill="white"/>{legend}'
+           f'{"".join(panels)}<text x="{width / 2 - 120:.0f}" y="{height - 8}" font-size="13">'
+           f'marker {name}: frames (gap shaded)</text></svg>')
+    path = Path(path)
+    path.write_text(svg)
+    return path

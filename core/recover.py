@@ -81,6 +81,9 @@ class KnnSettings:
     #: lower bound of the model's per-coordinate noise variance (m^2)
     noise_floor: float = 1e-6
     min_present: int = 3
+    #: raise the model noise to this share of the query's mean squared distance per coordinate
+    #: to its median neighbour (0: off)
+    query_noise: float = 1.0
     max_iterations: int = 20
     batch_frames: int = 256
     random_state: int = 0
@@ -316,9 +319,16 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
             raise KeyboardInterrupt
         rows = todo[start:start + settings.batch_frames]
         sel = frames[rows]
-        idx, _ = index.search(obs_norm[sel], ~model[sel], settings.k, ordered=False)
+        idx, dist2 = index.search(obs_norm[sel], ~model[sel], settings.k, ordered=False)
         neighbours = flat_kb[idx]  # float32: the covariance is summed in float32, then float64
         means[rows], comps[rows], lams[rows], noise[rows] = _local_pca(neighbours, settings, rng)
+        if settings.query_noise > 0:
+            # the query is no closer to its model than its neighbours are to it: a noise level
+            # below that lets the components chase the difference and extrapolate wildly
+            present = (~model[sel]).sum(axis=1)
+            share = settings.query_noise * (n - present) / n
+            noise[rows] = np.maximum(noise[rows],
+                                     share * np.median(dist2, axis=1) / (3 * np.maximum(present, 1)))
         progress(p0 + (p1 - p0) * 0.7 * (start + len(sel)) / max(1, len(todo)),
                  "searching and fitting local models")
     problem = _Problem(frames, obs_norm[frames], model[frames], means, comps, lams, noise, root,

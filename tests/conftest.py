@@ -22,3 +22,17 @@ def data_dir():
             pytest.fail(f"motion data not found at {DATA}")
         pytest.skip(f"motion data not found at {DATA}")
     return DATA
+
+
+_EXIT = {}
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _EXIT["status"] = int(exitstatus)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    from mocap_gapfill.addon.bpy_exit import leave_if_bpy_would_crash
+
+    leave_if_bpy_would_crash(_EXIT.get("status", 0))

@@ -2,6 +2,7 @@
 
 import os
 import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -12,6 +13,9 @@ try:
     import bpy  # noqa: F401
 except ImportError:
     bpy = None
+
+ROOT = Path(__file__).resolve().parents[2]
+LOCAL_MODULE = "bl_ext.mocap_gapfill_tests.mocap_gapfill"
 
 
 @pytest.fixture(scope="session")
@@ -26,3 +30,29 @@ def blender():
 @pytest.fixture(scope="session")
 def user_dir():
     return _USER
+
+
+@pytest.fixture(scope="module")
+def extension(blender):
+    """The working tree loaded as an extension from a local repository (a folder holding a link
+    to it), enabled as ``bl_ext.mocap_gapfill_tests.mocap_gapfill``."""
+    import addon_utils
+
+    folder = Path(tempfile.mkdtemp(prefix="mocap_gapfill_repo_"))
+    (folder / "mocap_gapfill").symlink_to(ROOT, target_is_directory=True)
+    repos = blender.context.preferences.extensions.repos
+    repo = repos.new(name="mocap_gapfill_tests", module="mocap_gapfill_tests",
+                     custom_directory=str(folder), source="USER")
+    addon_utils.enable(LOCAL_MODULE, default_set=True)
+    assert addon_utils.check(LOCAL_MODULE) == (True, True)
+    addon_utils.enable("io_anim_bvh", default_set=True)
+    yield blender
+    addon_utils.disable(LOCAL_MODULE, default_set=True)
+    repos.remove(repo)
+
+
+@pytest.fixture
+def scene(extension):
+    """An empty scene for each test."""
+    extension.ops.wm.read_homefile(use_empty=True)
+    return extension.context.scene

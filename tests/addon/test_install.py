@@ -70,15 +70,15 @@ def test_installs_enables_and_runs(installed, user_dir, data_dir):
     assert {"scipy", "ezc3d"} <= installed_pkgs, installed_pkgs
     result = bpy.ops.mocap_gapfill.file_info(filepath=str(data_dir / "cmu/c3d/01_01.c3d"))
     assert result == {"FINISHED"}
-    info = bpy.context.window_manager.mocap_gapfill_last_info
+    info = bpy.context.window_manager.mocap_gapfill.last_info
     assert info.startswith("2751 frames at 120 fps, 42 points, 2.40 % missing")
 
 
 def test_bad_file_is_reported_not_raised(installed, tmp_path):
     bad = tmp_path / "bad.c3d"
     bad.write_bytes(b"\x02\x50" + b"\x00" * 100)
-    before = installed.context.window_manager.mocap_gapfill_last_info
+    before = installed.context.window_manager.mocap_gapfill.last_info
     # an operator that reports an ERROR raises RuntimeError with the report text in bpy
     with pytest.raises(RuntimeError, match="too short for a C3D file"):
         installed.ops.mocap_gapfill.file_info(filepath=str(bad))
-    assert installed.context.window_manager.mocap_gapfill_last_info == before  # kept as it was
+    assert installed.context.window_manager.mocap_gapfill.last_info == before  # kept as it was

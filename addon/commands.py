@@ -1,0 +1,131 @@
+"""The command line's Blender commands (``mocap-gapfill blend``, and the scenes of
+``mocap-gapfill demo``); bpy is imported only when one of them runs."""
+
+from pathlib import Path
+
+import numpy as np
+
+from ..core.demo import BONE_GAPS
+
+
+def add_commands(sub):
+    """Add the Blender subcommands to the core command line's subparsers."""
+    p = sub.add_parser("blend", help="fill every gap of the takes in a .blend file (needs the "
+                                     "bpy module); saves a new file")
+    add_arguments(p, with_input=True)
+    p.set_defaults(func=cmd_blend)
+    sub.choices["demo"].set_defaults(func=cmd_demo)
+
+
+def add_arguments(parser, with_input=False):
+    """Options of the batch fill, shared by ``mocap-gapfill blend`` and ``blender -c``."""
+    if with_input:
+        parser.add_argument("blend", help="the .blend file to clean")
+    parser.add_argument("--kb", "-k", help="knowledge-base file (.npz)")
+    parser.add_argument("--objects", nargs="+", default=None,
+                        help="armatures / marker-set empties to fill (default: every take)")
+    parser.add_argument("--output", "-o", help="where to save (default: <input>_filled.blend)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="allow saving over the input or an existing output")
+    parser.add_argument("--method", default="knn",
+                        choices=("knn", "linear", "spline", "intercorrelation", "pca"))
+    parser.add_argument("-K", type=int, default=0, help="neighbours per frame (0: automatic)")
+    parser.add_argument("--max-gap", type=int, default=0, help="leave longer gaps unfilled")
+    parser.add_argument("--no-suspects", action="store_true",
+                        help="do not treat jumping or stretching keys as gaps")
+
+
+def cmd_demo(args):
+    """The core demo (numbers, KBs, plot), then the Blender scenes when bpy is installed."""
+    from ..core.demo import run_demo
+
+    demo = run_demo(args.outdir)
+    try:
+        import bpy  # noqa: F401
+    except ImportError:
+        print("the bpy module is not installed: Blender scenes skipped "
+              "(bash tools/setup.sh installs it)")
+        return 0
+    demo_scenes(args.outdir, demo)
+    return 0
+
+
+def cmd_blend(args):
+    from . import batch
+
+    batch.blend_main(args)
+    return 0
+
+
+def demo_scenes(outdir, demo, report=print):
+    """Blender scenes of the demo: an armature whose bones lost keys and a marker set with gaps,
+    saved as ``mocap_demo.blend``; filled through the add-on's operator and saved as
+    ``mocap_demo_filled.blend``. Returns the RMSE (mm) measured on Blender's own evaluation."""
+    import bpy
+
+    from . import bridge, compat
+    from . import register as register_addon, unregister as unregister_addon
+
+    outdir = Path(outdir).resolve()
+    register_addon()
+    try:
+        bpy.ops.wm.read_homefile(use_empty=True)
+        context = bpy.context
+        arm = bridge.import_armature(context, demo["skeleton"], "Walker")
+        remove_keys(arm, [(name, a + 1, b + 1) for name, a, b in BONE_GAPS])
+        markers = demo["markers"]
+        gappy = markers.replace(positions=np.where(demo["marker_gaps"][..., None], np.nan,
+                                                   markers.positions))
+        root = bridge.import_markers(context, gappy, "WalkerMarkers")
+        for owner in (arm, root):
+            compat.select_objects(context, [owner], active=owner)
+            bpy.ops.mocap_gapfill.detect_gaps()
+        context.scene.mocap_gapfill.kb_path = str(demo["kb_skeleton"])
+        bpy.ops.wm.save_as_mainfile(filepath=str(outdir / "mocap_demo.blend"))
+        report(f"scene with gaps -> {outdir / 'mocap_demo.blend'}")
+        scores = {}
+        for owner, kb, truth in ((arm, demo["kb_skeleton"], demo["skeleton"]),
+                                 (root, demo["kb_markers"], markers)):
+            context.scene.mocap_gapfill.kb_path = str(kb)
+            bpy.ops.mocap_gapfill.fill_gaps(objects=owner.name)
+            scores[owner.name] = take_rmse(owner, truth, context.scene)
+            report(f"  Blender {owner.name}: RMSE over the gap samples {scores[owner.name]:6.1f} mm")
+        bpy.ops.wm.save_as_mainfile(filepath=str(outdir / "mocap_demo_filled.blend"))
+        report(f"filled scene -> {outdir / 'mocap_demo_filled.blend'} "
+               "(Mocap tab: switch Original / Recovered)")
+        return scores
+    finally:
+        unregister_addon()
+
+
+def remove_keys(obj, gaps):
+    """Delete the keys of bones over frame ranges: ``[(bone, first, last), ...]``."""
+    from . import bridge, compat
+
+    curves = compat.fcurves(obj)
+    for bone, first, last in gaps:
+        tag = f'pose.bones["{bone}"]'
+        for curve in curves:
+            if curve.data_path.startswith(tag):
+                frames, values = bridge.curve_keys(curve)
+                keep = (frames < first) | (frames > last)
+                curve.keyframe_points.clear()
+                curve.keyframe_points.add(int(keep.sum()))
+                co = np.empty(2 * int(keep.sum()), dtype=np.float32)
+                co[0::2], co[1::2] = frames[keep], values[keep]
+                curve.keyframe_points.foreach_set("co", co)
+                curve.update()
+
+
+def take_rmse(owner, truth, scene):
+    """RMSE (mm) between a take as Blender now plays it and the truth, over the samples its gap
+    list covers (converted to points for armatures)."""
+    from . import bridge, gaps
+
+    take = bridge.read_take(owner, scene)
+    frames = take.positions.shape[0]
+    mask = bridge.missing_points(take, gaps.gap_mask(owner.mocap_gapfill.gaps, take.points,
+                                                     take.first, frames))
+    ref = truth.select(list(take.points)).positions[:frames]
+    err = (take.positions * take.metres - ref)[mask]
+    return float(1000 * np.sqrt(np.mean(np.sum(err ** 2, axis=1))))

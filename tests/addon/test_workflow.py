@@ -1,0 +1,328 @@
+"""The add-on's workflow on real data, through its operators, in the bpy module (4.2 LTS and 5.0).
+
+Marker set: CMU 85_02 (C3D, complete) imported as empties, keys deleted over ranges, gaps
+detected and filled from a KB of the other CMU C3D takes (subjects 01, 135). Armature: CMU 03_02
+(Daz-friendly BVH, complete) imported with Blender's own BVH importer, bone keys deleted over
+ranges, filled from a KB of every other Daz-friendly subject (every 4th pose). Both compared with the truth in millimetres.
+"""
+
+import gzip
+import hashlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+LOCAL_MODULE = "bl_ext.mocap_gapfill_tests.mocap_gapfill"  # conftest.extension loads it
+
+GEN = 5  # Keyframe.type GENERATED as foreach_get reports it
+
+
+def modules():
+    import importlib
+
+    root = importlib.import_module(LOCAL_MODULE)
+    from importlib import import_module
+
+    return (import_module(f"{root.__name__}.addon.bridge"),
+            import_module(f"{root.__name__}.addon.compat"),
+            import_module(f"{root.__name__}.addon.gaps"),
+            import_module(f"{root.__name__}.addon.commands"))
+
+
+def rmse_mm(a, b):
+    return float(1000 * np.sqrt(np.mean(np.sum((a - b) ** 2, axis=-1))))
+
+
+def delete_keys(obj, first, last):
+    """Delete every key of an object (a marker empty) on frames first..last."""
+    _, compat, _, _ = modules()
+    for curve in compat.fcurves(obj):
+        for key in reversed(list(curve.keyframe_points)):
+            if first <= key.co[0] <= last:
+                curve.keyframe_points.remove(key)
+
+
+@pytest.fixture(scope="module")
+def marker_kb(data_dir, tmp_path_factory):
+    from mocap_gapfill.core.kb import build_kb
+
+    path = tmp_path_factory.mktemp("kb") / "cmu_c3d.npz"
+    build_kb([data_dir / "cmu/c3d/01_01.c3d", data_dir / "cmu/c3d/135_02.c3d"]).save(path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def daz_kb(data_dir, tmp_path_factory):
+    from mocap_gapfill.core.kb import build_kb
+
+    path = tmp_path_factory.mktemp("kb") / "daz.npz"
+    build_kb([data_dir / "cmu/bvh/daz_friendly"], exclude=["*/03/*"], fps=120, skip_frames=6,
+             stride=4).save(path)
+    return path
+
+
+MARKER_GAPS = (("LELB", 100, 189), ("RKNE", 300, 389), ("LFHD", 1, 60), ("RTOE", 751, 810),
+               ("LWRA", 400, 519))
+
+
+def test_c3d_markers_detect_fill_preview(scene, data_dir, marker_kb):
+    from mocap_gapfill.core.fill import fill
+    from mocap_gapfill.core.io import read_motion
+
+    bpy = pytest.importorskip("bpy")
+    bridge, _, gaps, _ = modules()
+    path = data_dir / "cmu/c3d/85_02.c3d"
+    assert bpy.ops.mocap_gapfill.import_markers(filepath=str(path)) == {"FINISHED"}
+    root = bpy.context.active_object
+    assert bridge.is_marker_set(root) and len(root.mocap_gapfill.gaps) == 0  # 85_02 is complete
+    assert (scene.frame_start, scene.frame_end, scene.render.fps) == (1, 810, 120)
+    for name, first, last in MARKER_GAPS:
+        delete_keys(bpy.data.objects[name], first, last)
+    scene.mocap_gapfill.detect_suspects = False
+    assert bpy.ops.mocap_gapfill.detect_gaps() == {"FINISHED"}
+    found = sorted((g.point, g.first, g.last, g.kind) for g in root.mocap_gapfill.gaps)
+    assert found == sorted((n, a, b, "MISSING") for n, a, b in MARKER_GAPS)
+    stats = {p.name: (p.gaps, p.frames, p.longest) for p in root.mocap_gapfill.points}
+    assert stats["LWRA"] == (1, 120, 120) and stats["LFHD"] == (1, 60, 60)
+
+    # fill from the knowledge base, through the operator
+    scene.mocap_gapfill.kb_path = str(marker_kb)
+    assert bpy.ops.mocap_gapfill.fill_gaps(scope="ALL") == {"FINISHED"}
+    assert root.mocap_gapfill.showing == "RECOVERED"
+    assert all(g.filled for g in root.mocap_gapfill.gaps)
+    take = bridge.read_take(root, scene)
+    truth = read_motion(path).select(list(take.points))
+    mask = gaps.gap_mask(root.mocap_gapfill.gaps, take.points, take.first, 810)
+    knn = rmse_mm(take.positions[mask], truth.positions[mask])
+    query = truth.replace(positions=np.where(mask[..., None], np.nan, truth.positions))
+    linear, spline = (rmse_mm(fill(query, m).positions[mask], truth.positions[mask])
+                      for m in ("linear", "spline"))
+    print(f"\n85_02 markers, {int(mask.sum())} samples in 5 gaps: knn RMSE {knn:.1f} mm, "
+          f"linear {linear:.1f} mm, spline {spline:.1f} mm")
+    assert knn < 0.5 * min(linear, spline)  # measured: 90.1 vs 313.2 / 437.5
+    # observed keys kept (keys are float32: 1 micrometre)
+    assert np.abs(take.positions[~mask] - truth.positions[~mask]).max() < 1e-6
+
+    # filled keys are typed GENERATED; the original actions are untouched
+    elbow = bpy.data.objects["LELB"]
+    curve = bridge.compat.fcurves(elbow).find("location", index=0)
+    types = np.empty(len(curve.keyframe_points), dtype=np.int32)
+    curve.keyframe_points.foreach_get("type", types)
+    frames, _ = bridge.curve_keys(curve)
+    assert set(frames[types == GEN].astype(int)) == set(range(100, 190))
+    root.mocap_gapfill.showing = "ORIGINAL"
+    assert elbow.animation_data.action == elbow.mocap_gapfill.original_action
+    original = bridge.read_take(root, scene)
+    assert np.array_equal(np.isnan(original.positions[..., 0]), mask)
+
+
+def test_clicking_a_gap_selects_and_jumps(scene, data_dir):
+    bpy = pytest.importorskip("bpy")
+    path = data_dir / "cmu/c3d/01_01.c3d"  # real gaps
+    bpy.ops.mocap_gapfill.import_markers(filepath=str(path))
+    root = bpy.context.active_object
+    settings = root.mocap_gapfill
+    assert len(settings.gaps) == 3  # MANIFEST: 3 gaps, the longest 2,623 frames on RBAC-1
+    longest = max(settings.gaps, key=lambda g: g.last - g.first)
+    assert (longest.point, longest.last - longest.first + 1) == ("RBAC-1", 2623)
+    settings.gap_index = list(settings.gaps).index(longest)
+    assert bpy.context.active_object.name == "RBAC-1"
+    assert [o.name for o in bpy.context.selected_objects] == ["RBAC-1"]
+    assert scene.frame_current == longest.first
+
+
+@pytest.fixture
+def daz_armature(scene, data_dir, tmp_path):
+    bpy = pytest.importorskip("bpy")
+    bvh = tmp_path / "03_02.bvh"
+    bvh.write_bytes(gzip.decompress((data_dir / "cmu/bvh/daz_friendly/03/03_02.bvh.gz")
+                                    .read_bytes()))
+    bpy.ops.import_anim.bvh(filepath=str(bvh), update_scene_fps=True,
+                            update_scene_duration=True)
+    return bpy.context.active_object
+
+
+BONE_GAPS = (("lForeArm", 120, 219), ("rShin", 150, 239), ("chest", 300, 359))
+
+
+def remove_bone_keys(obj, bone_gaps):
+    _, _, _, commands = modules()
+    commands.remove_keys(obj, bone_gaps)
+
+
+def test_bvh_armature_fill_writes_rotations(daz_armature, daz_kb):
+    from mocap_gapfill.core.fill import fill
+
+    bpy = pytest.importorskip("bpy")
+    bridge, compat, gaps, _ = modules()
+    arm = daz_armature
+    scene = bpy.context.scene
+    assert arm.type == "ARMATURE" and scene.render.fps == 120
+    truth = bridge.read_take(arm, scene)
+    assert truth.metres == 0.01  # Daz BVH in cm: guessed from the height
+    remove_bone_keys(arm, BONE_GAPS)
+    scene.mocap_gapfill.detect_suspects = False
+    assert bpy.ops.mocap_gapfill.detect_gaps() == {"FINISHED"}
+    found = sorted((g.point, g.first, g.last) for g in arm.mocap_gapfill.gaps)
+    assert found == sorted(BONE_GAPS)
+    broken = bridge.read_take(arm, scene)
+    bone_gaps = gaps.gap_mask(arm.mocap_gapfill.gaps, broken.points, broken.first,
+                              broken.positions.shape[0])
+    missing = bridge.missing_points(broken, bone_gaps)
+    keys_before = {(c.data_path, c.array_index): len(c.keyframe_points)
+                   for c in compat.fcurves(arm)}
+
+    scene.mocap_gapfill.kb_path = str(daz_kb)
+    assert bpy.ops.mocap_gapfill.fill_gaps() == {"FINISHED"}
+    after = bridge.read_take(arm, scene)
+    m = truth.metres
+    knn = rmse_mm(after.positions[missing] * m, truth.positions[missing] * m)
+    interp = broken.motion(missing)
+    linear = rmse_mm(fill(interp, "linear").positions[missing], truth.positions[missing] * m)
+    bezier = rmse_mm(broken.positions[missing] * m, truth.positions[missing] * m)
+    print(f"\n03_02 armature, {int(missing.sum())} joint samples below 3 bone gaps: knn (FK of "
+          f"written keys) RMSE {knn:.1f} mm, linear {linear:.1f} mm, Blender's Bezier bridge "
+          f"{bezier:.1f} mm")
+    # measured: knn 82.7, linear 91.4; Blender's own rotation interpolation 78.4 mm on this take
+    # (see the issue-4 note: walking on uneven terrain is poorly covered by the KB)
+    assert knn < linear and knn < 100.0
+    # joints outside the gaps did not move
+    assert np.abs(after.positions[~missing] - truth.positions[~missing]).max() * m < 1e-4
+
+    # the original action is intact, and still plays on demand
+    original = arm.mocap_gapfill.original_action
+    assert original is not None and arm.animation_data.action != original
+    arm.mocap_gapfill.showing = "ORIGINAL"
+    assert {(c.data_path, c.array_index): len(c.keyframe_points)
+            for c in compat.fcurves(arm)} == keys_before
+    assert np.allclose(bridge.read_take(arm, scene).positions, broken.positions, equal_nan=True)
+
+    # rotations stay continuous across the gap ends: no step bigger than the motion's own
+    arm.mocap_gapfill.showing = "RECOVERED"
+    for bone, first, last in BONE_GAPS:
+        j = after.points.index(bone)
+        steps = _rotation_steps(after.extra["basis"][:, j])
+        inside = steps[first - 2:last + 1]
+        assert inside.max() < 4 * _rotation_steps(truth.extra["basis"][:, j]).max() + 0.02, bone
+
+
+def _rotation_steps(basis):
+    r = basis[:, :3, :3]
+    rel = np.einsum("fji,fjk->fik", r[:-1], r[1:])
+    return np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1))
+
+
+def test_keys_written_from_true_joints_reproduce_them(daz_armature):
+    """Write-back alone: targets = the true joints; Blender's FK of the written Euler keys must
+    land on them within 1 mm (rotation orders, rest matrices and parents all used for real)."""
+    bpy = pytest.importorskip("bpy")
+    bridge, _, gaps, _ = modules()
+    arm, scene = daz_armature, bpy.context.scene
+    truth = bridge.read_take(arm, scene)
+    remove_bone_keys(arm, BONE_GAPS)
+    scene.mocap_gapfill.detect_suspects = False
+    bpy.ops.mocap_gapfill.detect_gaps()
+    broken = bridge.read_take(arm, scene)
+    bone_gaps = gaps.gap_mask(arm.mocap_gapfill.gaps, broken.points, broken.first,
+                              broken.positions.shape[0])
+    basis, _ = bridge.solve_armature(broken, truth.positions * truth.metres, bone_gaps)
+    assert bridge.write_armature(broken, basis, bone_gaps) == int(bone_gaps.sum())
+    modes = {b.rotation_mode for b in arm.pose.bones}
+    assert modes - {"QUATERNION", "AXIS_ANGLE"}, modes  # Euler orders from the BVH
+    after = bridge.read_take(arm, scene)
+    error_mm = np.abs(after.positions - truth.positions).max() * truth.metres * 1000
+    print(f"\nFK of written keys vs true joints: max {error_mm:.4f} mm")
+    assert error_mm < 1.0
+
+
+def test_suspect_keys_are_flagged(daz_armature):
+    bpy = pytest.importorskip("bpy")
+    arm, scene = daz_armature, bpy.context.scene
+    pbone = arm.pose.bones["lForeArm"]
+    scene.frame_set(250)
+    pbone.rotation_euler.x += 1.5  # a flipped joint on one frame
+    pbone.keyframe_insert("rotation_euler", frame=250)
+    scene.mocap_gapfill.detect_suspects = True
+    bpy.ops.mocap_gapfill.detect_gaps()
+    suspects = [(g.point, g.first, g.last) for g in arm.mocap_gapfill.gaps if g.kind == "SUSPECT"]
+    assert any(p == "lForeArm" and a <= 250 <= b and b - a < 6 for p, a, b in suspects), suspects
+
+
+def test_errors_are_reported_and_change_nothing(daz_armature, marker_kb):
+    bpy = pytest.importorskip("bpy")
+    arm, scene = daz_armature, bpy.context.scene
+    remove_bone_keys(arm, BONE_GAPS)
+    bpy.ops.mocap_gapfill.detect_gaps()
+    action = arm.animation_data.action
+    scene.mocap_gapfill.kb_path = ""
+    with pytest.raises(RuntimeError, match="choose a knowledge base"):
+        bpy.ops.mocap_gapfill.fill_gaps()
+    scene.mocap_gapfill.kb_path = str(marker_kb)  # markers: the wrong knowledge base
+    with pytest.raises(RuntimeError, match="does not match this motion"):
+        bpy.ops.mocap_gapfill.fill_gaps()
+    assert arm.animation_data.action == action and arm.mocap_gapfill.recovered_action is None
+    assert not any(g.filled for g in arm.mocap_gapfill.gaps)
+
+
+def test_mark_gap_over_preview_range(daz_armature):
+    bpy = pytest.importorskip("bpy")
+    _, compat, _, _ = modules()
+    arm, scene = daz_armature, bpy.context.scene
+    compat.select_bones(arm, ["rHand", "lShin"])
+    scene.use_preview_range = True
+    scene.frame_preview_start, scene.frame_preview_end = 40, 80
+    assert bpy.ops.mocap_gapfill.mark_gap() == {"FINISHED"}
+    marked = sorted((g.point, g.first, g.last, g.kind) for g in arm.mocap_gapfill.gaps)
+    assert marked == [("lShin", 40, 80, "MARKED"), ("rHand", 40, 80, "MARKED")]
+    bpy.ops.mocap_gapfill.detect_gaps()  # detection keeps hand-marked gaps
+    assert sum(g.kind == "MARKED" for g in arm.mocap_gapfill.gaps) == 2
+
+
+def _sha(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_batch_command_writes_a_new_filled_file(daz_armature, daz_kb, tmp_path):
+    bpy = pytest.importorskip("bpy")
+    import importlib
+
+    batch = importlib.import_module(f"{LOCAL_MODULE}.addon.batch")
+    arm = daz_armature
+    remove_bone_keys(arm, BONE_GAPS)
+    source = tmp_path / "take.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(source))
+    before = _sha(source)
+    assert batch.cli_command(["--kb", str(daz_kb), "--no-suspects"]) == 0
+    out = tmp_path / "take_filled.blend"
+    assert out.is_file() and _sha(source) == before
+    assert batch.cli_command(["--kb", str(daz_kb)]) == 1  # the output exists: not replaced
+
+    # the same through the command line and the bpy module, in a fresh process
+    out2 = tmp_path / "via_cli.blend"
+    r = subprocess.run([sys.executable, "-m", "mocap_gapfill", "blend", str(source), "--kb",
+                        str(daz_kb), "--no-suspects", "-o", str(out2)], capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "filled" in r.stdout and _sha(source) == before
+
+    for path in (out, out2):
+        bpy.ops.wm.open_mainfile(filepath=str(path))
+        arm = bpy.data.objects[daz_armature_name(path)]
+        recovered = arm.mocap_gapfill.recovered_action
+        assert recovered is not None and arm.animation_data.action == recovered
+        assert {g.point for g in arm.mocap_gapfill.gaps if g.filled} == {b for b, _, _ in
+                                                                         BONE_GAPS}
+        generated = 0
+        for curve in modules()[1].fcurves(arm):
+            types = np.empty(len(curve.keyframe_points), dtype=np.int32)
+            curve.keyframe_points.foreach_get("type", types)
+            generated += int((types == GEN).sum())
+        assert generated >= 3 * 100  # 3 rotation channels x >= 100 gap frames
+
+
+def daz_armature_name(path):
+    import bpy
+
+    return next(o.name for o in bpy.data.objects if o.type == "ARMATURE")
