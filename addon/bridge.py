@@ -19,7 +19,7 @@ import bpy
 import numpy as np
 
 from ..core.motion import UNIT_SCALES, Motion, rigid_marker_pairs, skeleton_limbs, units_for_height
-from ..core.posing import forward, points_missing, solve_pose
+from ..core.posing import points_missing, solve_pose
 from . import compat
 
 MARKER_SET = "mocap_gapfill_marker_set"  # custom property on the parent empty of a marker set
@@ -326,14 +326,18 @@ def solve_armature(take, filled, bone_gaps):
     return basis, pose
 
 
-def write_armature(take, basis, bone_gaps):
+def write_armature(take, basis, bone_gaps, recovered=True):
     """Rotation (and location, for moving bones) keys of the gap frames, in each bone's rotation
-    mode, continuous with the key before each gap (compatible Euler angles, quaternion signs)."""
+    mode, continuous with the key before each gap (compatible Euler angles, quaternion signs).
+    Into the recovered action, typed GENERATED; with ``recovered=False`` (import), into the
+    current action as ordinary keys."""
     from mathutils import Matrix
 
     obj = bpy.data.objects[take.name]
-    original_action(obj)
-    recovered_action(obj)
+    key_type = "GENERATED" if recovered else "KEYFRAME"
+    if recovered:
+        original_action(obj)
+        recovered_action(obj)
     curves = compat.fcurves(obj, create=True)
     written = 0
     for j, name in enumerate(take.points):
@@ -354,11 +358,12 @@ def write_armature(take, basis, bone_gaps):
             values.append(previous)
         values = np.array(values)
         for axis in range(count):
-            set_keys(curves, f"{path}.{rot_path}", axis, rows + take.first, values[:, axis], name)
+            set_keys(curves, f"{path}.{rot_path}", axis, rows + take.first, values[:, axis], name,
+                     key_type)
         if take.extra["moves"][j]:
             for axis in range(3):
                 set_keys(curves, f"{path}.location", axis, rows + take.first,
-                         basis[rows, j, axis, 3], name)
+                         basis[rows, j, axis, 3], name, key_type)
         written += len(rows)
     return written
 
@@ -380,14 +385,6 @@ def _rotation_values(matrix, mode, previous):
     if previous is not None:
         return tuple(rot.to_euler(mode, Euler(previous, mode)))
     return tuple(rot.to_euler(mode))
-
-
-def forward_heads(take, basis):
-    """World-space bone heads (frames, bones, 3) that ``basis`` gives, by the same kinematics
-    Blender uses (for checks and reports)."""
-    pose = forward(take.extra["rest"], take.parents, basis)
-    heads = pose[..., :3, 3]
-    return heads @ take.world[:3, :3].T + take.world[:3, 3]
 
 
 # ---- import ------------------------------------------------------------------------------------
@@ -482,36 +479,6 @@ def import_armature(context, motion, name, first_frame=1):
                 motion.fps, 1.0, np.eye(4), motion.parents,
                 extra={"rest": rest, "basis": reference, "moves": translate.any(axis=0),
                        "modes": tuple("QUATERNION" for _ in range(n))})
-    _write_all(take, basis, rotate | (translate & present))
+    write_armature(take, basis, rotate | (translate & present), recovered=False)
     set_scene_timing(context.scene, motion.fps, first_frame, first_frame + motion.n_frames - 1)
     return obj
-
-
-def _write_all(take, basis, rows_mask):
-    """Keys straight into the object's current action (import), typed as ordinary keyframes."""
-    obj = bpy.data.objects[take.name]
-    curves = compat.fcurves(obj, create=True)
-    for j, name in enumerate(take.points):
-        rows = np.flatnonzero(rows_mask[:, j])
-        if not len(rows):
-            continue
-        path = f'pose.bones["{bpy.utils.escape_identifier(name)}"]'
-        q = _quaternions(basis[rows, j, :3, :3])
-        for axis in range(4):
-            set_keys(curves, f"{path}.rotation_quaternion", axis, rows + take.first, q[:, axis],
-                     name, key_type="KEYFRAME")
-        if take.extra["moves"][j]:
-            for axis in range(3):
-                set_keys(curves, f"{path}.location", axis, rows + take.first,
-                         basis[rows, j, axis, 3], name, key_type="KEYFRAME")
-
-
-def _quaternions(rot):
-    """(w, x, y, z) of rotation matrices, sign-continuous along the first axis."""
-    from scipy.spatial.transform import Rotation
-
-    xyzw = Rotation.from_matrix(rot).as_quat()
-    q = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
-    flip = np.cumsum(np.r_[0, np.sum(q[1:] * q[:-1], axis=1) < 0]) % 2 == 1
-    q[flip] *= -1
-    return q

@@ -63,7 +63,6 @@ def demo_scenes(outdir, demo, report=print):
     ``mocap_demo_filled.blend``. Returns the RMSE (mm) measured on Blender's own evaluation."""
     import bpy
 
-    from . import bridge, compat
     from . import register as register_addon, unregister as unregister_addon
 
     outdir = Path(outdir).resolve()
@@ -71,16 +70,8 @@ def demo_scenes(outdir, demo, report=print):
     try:
         bpy.ops.wm.read_homefile(use_empty=True)
         context = bpy.context
-        arm = bridge.import_armature(context, demo["skeleton"], "Walker")
-        remove_keys(arm, [(name, a + 1, b + 1) for name, a, b in BONE_GAPS])
+        arm, root = build_demo_scene(context, demo)
         markers = demo["markers"]
-        gappy = markers.replace(positions=np.where(demo["marker_gaps"][..., None], np.nan,
-                                                   markers.positions))
-        root = bridge.import_markers(context, gappy, "WalkerMarkers")
-        for owner in (arm, root):
-            compat.select_objects(context, [owner], active=owner)
-            bpy.ops.mocap_gapfill.detect_gaps()
-        context.scene.mocap_gapfill.kb_path = str(demo["kb_skeleton"])
         bpy.ops.wm.save_as_mainfile(filepath=str(outdir / "mocap_demo.blend"))
         report(f"scene with gaps -> {outdir / 'mocap_demo.blend'}")
         scores = {}
@@ -96,6 +87,26 @@ def demo_scenes(outdir, demo, report=print):
         return scores
     finally:
         unregister_addon()
+
+
+def build_demo_scene(context, demo):
+    """The demo's armature (keys removed from three bones) and marker set (six markers with
+    gaps) in the current scene, gaps detected; returns ``(armature, marker_set)``."""
+    import bpy
+
+    from . import bridge, compat
+
+    arm = bridge.import_armature(context, demo["skeleton"], "Walker")
+    remove_keys(arm, [(name, a + 1, b + 1) for name, a, b in BONE_GAPS])
+    markers = demo["markers"]
+    gappy = markers.replace(positions=np.where(demo["marker_gaps"][..., None], np.nan,
+                                               markers.positions))
+    root = bridge.import_markers(context, gappy, "WalkerMarkers")
+    for owner in (arm, root):
+        compat.select_objects(context, [owner], active=owner)
+        bpy.ops.mocap_gapfill.detect_gaps()
+    context.scene.mocap_gapfill.kb_path = str(demo["kb_skeleton"])
+    return arm, root
 
 
 def remove_keys(obj, gaps):

@@ -52,13 +52,6 @@ def new_fcurve(curves, data_path, index, group):
         return curves.new(data_path, index=index, group_name=group)
 
 
-def action_for_object(action, obj):
-    """Whether ``action`` has channels an object like ``obj`` can play (for listing actions)."""
-    if HAS_SLOTS:
-        return any(s.target_id_type in {"OBJECT", "UNSPECIFIED"} for s in action.slots)
-    return action.id_root in {"OBJECT", ""}
-
-
 def select_objects(context, objects, active=None):
     """Select exactly ``objects`` in the view layer and make ``active`` the active one."""
     for obj in context.view_layer.objects:

@@ -78,7 +78,8 @@ def run_demo(outdir="out", progress=None, report=print):
             if method == "knn":
                 filled = result
                 if label == "markers":
-                    write_motion(result, outdir / "demo_markers_filled.c3d", overwrite=True)
+                    out = _write_c3d_or_npz(result, outdir / "demo_markers_filled.c3d")
+                    report(f"filled markers -> {out}")
         if label == "markers":
             plot = write_plot(outdir / "demo_markers.svg", truth, query, filled,
                               fill(query, "linear"), "LWRA")
@@ -86,6 +87,14 @@ def run_demo(outdir="out", progress=None, report=print):
     return {"scores": scores, "skeleton": skeleton, "markers": markers, "bone_gaps": bone_gaps,
             "marker_gaps": marker_miss, "kb_skeleton": outdir / "kb_skeleton.npz",
             "kb_markers": outdir / "kb_markers.npz"}
+
+
+def _write_c3d_or_npz(motion, path):
+    try:
+        import ezc3d  # noqa: F401
+    except ImportError:  # e.g. a distribution's Blender without the bundled wheels
+        path = path.with_suffix(".npz")
+    return write_motion(motion, path, overwrite=True)
 
 
 def write_plot(path, truth, query, recovered, linear, name, width=900, height=560):

@@ -51,6 +51,10 @@ CHANGE_ROOT = 0.01
 CHANGE_ANGLE = np.deg2rad(1.0)
 
 
+#: the query-noise factors "auto" chooses from, and how many frames it checks
+NOISE_FACTORS = (0.0, 0.25, 1.0)
+CALIBRATION_FRAMES = 192
+
 #: neighbours per frame when KnnSettings.k is None
 DEFAULT_K = 1024
 #: subspace iteration of the local PCA: extra columns and power iterations
@@ -81,9 +85,10 @@ class KnnSettings:
     #: lower bound of the model's per-coordinate noise variance (m^2)
     noise_floor: float = 1e-6
     min_present: int = 3
-    #: raise the model noise to this share of the query's mean squared distance per coordinate
-    #: to its median neighbour (0: off)
-    query_noise: float = 1.0
+    #: raise each frame's model noise to ``query_noise * missing share * (mean squared distance
+    #: per coordinate from the query to its median neighbour)``; "auto" picks the factor among
+    #: NOISE_FACTORS per fill by hiding present points and predicting them (0: the paper)
+    query_noise: object = "auto"
     max_iterations: int = 20
     batch_frames: int = 256
     random_state: int = 0
@@ -206,13 +211,58 @@ class _Problem:
 
     def closed_form(self):
         """Per-frame minimiser of the prior and input terms alone: (m, r)."""
-        present = np.repeat(~self.miss, 3, axis=1).astype(float)
-        wo = self.comps * present[..., None]
-        lhs = wo.transpose(0, 2, 1) @ wo * (self.s.w_in / self.noise)[:, None, None]
-        lhs += self.s.w_r * np.eye(lhs.shape[1]) * np.where(self.used, self.inv_lam, 1e12)[:, None, :]
-        x = self.obs.reshape(len(self.obs), -1) - self.mean
-        rhs = ((x * present)[:, None, :] @ wo)[:, 0] * (self.s.w_in / self.noise)[:, None]
-        return np.linalg.solve(lhs, rhs[..., None])[..., 0] * self.used
+        return _closed_form(self.miss, self.obs, self.mean, self.comps, self.used, self.inv_lam,
+                            self.noise, self.s)
+
+
+def _closed_form(miss, obs, mean, comps, used, inv_lam, noise, settings):
+    """Coefficients (m, r) minimising the retrieval prior + input terms, frame by frame."""
+    present = np.repeat(~miss, 3, axis=1).astype(float)
+    wo = comps * present[..., None]
+    lhs = wo.transpose(0, 2, 1) @ wo * (settings.w_in / noise)[:, None, None]
+    lhs += settings.w_r * np.eye(lhs.shape[1]) * np.where(used, inv_lam, 1e12)[:, None, :]
+    x = obs.reshape(len(obs), -1) - mean
+    rhs = ((x * present)[:, None, :] @ wo)[:, 0] * (settings.w_in / noise)[:, None]
+    return np.linalg.solve(lhs, rhs[..., None])[..., 0] * used
+
+
+def _noise_factor(obs_norm, model, frames, index, settings, rng):
+    """The query-noise factor (of NOISE_FACTORS) that best recovers known points hidden the way
+    the gaps hide points: frames are drawn where the points missing in some modelled frame are
+    all present, those points are hidden, the frames are searched and modelled as in a fill,
+    and each factor's closed-form prediction of the hidden points is scored."""
+    patterns, counts = np.unique(model[frames], axis=0, return_counts=True)
+    order = rng.permutation(len(patterns))[:16]
+    budget = min(CALIBRATION_FRAMES, len(frames))
+    share = counts[order] / counts[order].sum()
+    rows, hidden = [], []
+    for pattern, part in zip(patterns[order], share):
+        ok = ~(model & pattern).any(axis=1) & ((~model).sum(axis=1) - pattern.sum()
+                                                 >= settings.min_present)
+        candidates = np.flatnonzero(ok)
+        take = min(len(candidates), max(1, int(round(budget * part))))
+        if take:
+            rows.extend(rng.choice(candidates, take, replace=False))
+            hidden.extend([pattern] * take)
+    if not rows:
+        return 1.0
+    rows, hidden = np.array(rows), np.array(hidden)
+    mask = model[rows] | hidden
+    idx, dist2 = index.search(obs_norm[rows], ~mask, settings.k, ordered=False)
+    means, comps, lams, noise = _local_pca(index.poses.reshape(index.n, -1)[idx], settings, rng)
+    n = mask.shape[1]
+    present = (~mask).sum(axis=1)
+    spread = ((n - present) / n) * np.median(dist2, axis=1) / (3 * np.maximum(present, 1))
+    obs = np.nan_to_num(obs_norm[rows])
+    used = lams > 0
+    inv_lam = np.where(used, 1.0 / np.where(used, lams, 1.0), 0.0)
+    errors = []
+    for factor in NOISE_FACTORS:
+        level = np.maximum(noise, factor * spread)
+        h = _closed_form(mask, obs, means, comps, used, inv_lam, level, settings)
+        pose = (means + (comps @ h[..., None])[..., 0]).reshape(len(rows), n, 3)
+        errors.append(float(((pose - obs) ** 2)[hidden].sum()))
+    return NOISE_FACTORS[int(np.argmin(errors))]
 
 
 def _apply_points(matrix, x):
@@ -304,14 +354,15 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
     m = len(frames)
     d = 3 * n
     if "models" in cache:
-        means, comps, lams, noise = cache["models"]
+        means, comps, lams, noise, spread = cache["models"]
         todo = np.flatnonzero(cache["changed"][frames])
     else:
         means = np.empty((m, d))
         comps = np.empty((m, d, min(settings.max_components, d, settings.k - 1)))
         lams = np.empty((m, comps.shape[2]))
         noise = np.empty(m)
-        cache["models"] = (means, comps, lams, noise)
+        spread = np.zeros(m)
+        cache["models"] = (means, comps, lams, noise, spread)
         todo = np.arange(m)
     flat_kb = index.poses.reshape(index.n, -1)
     for start in range(0, len(todo), settings.batch_frames):
@@ -322,16 +373,18 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
         idx, dist2 = index.search(obs_norm[sel], ~model[sel], settings.k, ordered=False)
         neighbours = flat_kb[idx]  # float32: the covariance is summed in float32, then float64
         means[rows], comps[rows], lams[rows], noise[rows] = _local_pca(neighbours, settings, rng)
-        if settings.query_noise > 0:
-            # the query is no closer to its model than its neighbours are to it: a noise level
-            # below that lets the components chase the difference and extrapolate wildly
-            present = (~model[sel]).sum(axis=1)
-            share = settings.query_noise * (n - present) / n
-            noise[rows] = np.maximum(noise[rows],
-                                     share * np.median(dist2, axis=1) / (3 * np.maximum(present, 1)))
+        # how far the query lies from its neighbours, per coordinate, times the missing share:
+        # with a noise level far below it the components chase that difference and may
+        # extrapolate wildly into the missing points (see docs/METHOD_NOTES.md)
+        present = (~model[sel]).sum(axis=1)
+        spread[rows] = ((n - present) / n) * np.median(dist2, axis=1) / (3 * np.maximum(present, 1))
         progress(p0 + (p1 - p0) * 0.7 * (start + len(sel)) / max(1, len(todo)),
                  "searching and fitting local models")
-    problem = _Problem(frames, obs_norm[frames], model[frames], means, comps, lams, noise, root,
+    if "factor" not in cache:
+        cache["factor"] = (_noise_factor(obs_norm, model, frames, index, settings, rng)
+                           if settings.query_noise == "auto" else float(settings.query_noise))
+    level = np.maximum(noise, cache["factor"] * spread)
+    problem = _Problem(frames, obs_norm[frames], model[frames], means, comps, lams, level, root,
                        angle, limbs, lengths, fps, settings, np.nan_to_num(pos))
     h0 = problem.closed_form()
     if settings.max_iterations > 0 and (settings.w_s or settings.w_l):

@@ -172,9 +172,3 @@ def take(gait=TEST_GAIT, frames=300, fps=60.0, phase=0.0, name="synthetic"):
     marker_set = Motion(markers, marker_names, fps, limbs=rigid_marker_pairs(markers),
                         source=f"{name} (markers)", source_format="array")
     return skeleton, marker_set
-
-
-def rest_offsets():
-    """Rest offsets (joints, 3) of the skeleton: the joint positions of the rest pose are their
-    running sums along the hierarchy."""
-    return OFFSETS.copy()

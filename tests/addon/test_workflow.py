@@ -101,7 +101,7 @@ def test_c3d_markers_detect_fill_preview(scene, data_dir, marker_kb):
                       for m in ("linear", "spline"))
     print(f"\n85_02 markers, {int(mask.sum())} samples in 5 gaps: knn RMSE {knn:.1f} mm, "
           f"linear {linear:.1f} mm, spline {spline:.1f} mm")
-    assert knn < 0.5 * min(linear, spline)  # measured: 90.1 vs 313.2 / 437.5
+    assert knn < 0.5 * min(linear, spline)  # measured: 90.8 vs 313.2 / 437.5
     # observed keys kept (keys are float32: 1 micrometre)
     assert np.abs(take.positions[~mask] - truth.positions[~mask]).max() < 1e-6
 

@@ -1,0 +1,130 @@
+"""Runs inside a real Blender (tools/gui_check.sh), with the add-on loaded from a local extension
+repository. In background mode (``-b -- build``) it builds the demo scene with the add-on's own
+code and saves it; in the GUI it opens that scene, fills it with the UI operator (invoked: modal,
+progress, Esc to cancel), shows the recovered motion and a ghost of the original, and takes
+screenshots. Prints 'mocap_gapfill: ...' lines."""
+
+import subprocess
+import sys
+
+import addon_utils
+import bpy
+
+REPO = "/work/repo"
+OUT = "/work/out"
+MODULE = "bl_ext.gui_check.mocap_gapfill"
+
+
+def say(*args):
+    print("mocap_gapfill:", *args, flush=True)
+
+
+def shot(name):
+    subprocess.run(f"xwd -root -display :99 | xwdtopnm 2>/dev/null | pnmtopng > {OUT}/{name}.png",
+                   shell=True, check=True)
+    say("screenshot", name)
+
+
+def view3d():
+    for window in bpy.context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                return window, area
+    raise RuntimeError("no 3D view")
+
+
+def enable():
+    say("Blender", bpy.app.version_string, "Python", sys.version.split()[0])
+    bpy.context.preferences.extensions.repos.new(name="gui_check", module="gui_check",
+                                                 custom_directory=REPO, source="USER")
+    addon_utils.enable(MODULE, default_set=True)
+    say("enabled", addon_utils.check(MODULE))
+
+
+def build():
+    import importlib
+
+    commands = importlib.import_module(MODULE + ".addon.commands")
+    demo_mod = importlib.import_module(MODULE + ".core.demo")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    demo = demo_mod.run_demo(OUT, report=lambda m: say(m))
+    commands.build_demo_scene(bpy.context, demo)
+    bpy.ops.wm.save_as_mainfile(filepath=f"{OUT}/mocap_demo.blend")
+    say("scene saved", f"{OUT}/mocap_demo.blend")
+    bpy.context.preferences.view.show_splash = False  # saved prefs: no first-run splash either
+    bpy.ops.wm.save_userpref()
+
+
+def frame_view(frame):
+    """Frame the walker at ``frame`` in the 3D view, with the sidebar open on the Mocap tab."""
+    arm = bpy.data.objects["Walker"]
+    context_select(arm)
+    bpy.context.scene.frame_set(frame)
+    window, area = view3d()
+    space = area.spaces.active
+    space.show_region_ui = True
+    space.overlay.show_relationship_lines = False
+    region = [r for r in area.regions if r.type == "WINDOW"][0]
+    with bpy.context.temp_override(window=window, area=area, region=region):
+        bpy.ops.view3d.view_selected()
+    ui = [r for r in area.regions if r.type == "UI"][0]
+    try:
+        ui.active_panel_category = "Mocap"
+    except (AttributeError, TypeError):  # read-only before 4.4: scroll the tabs (Item, Tool,
+        x, y = ui.x + ui.width // 2, window.height - (ui.y + ui.height // 2)  # View, Mocap)
+        subprocess.run(f"xdotool mousemove {x} {y} keydown ctrl click 5 click 5 click 5 "
+                       "keyup ctrl", shell=True, env={"DISPLAY": ":99"})
+
+
+def context_select(obj):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o == obj)
+    bpy.context.view_layer.objects.active = obj
+
+
+STATE = {"step": 0}
+
+
+def step():
+    state = STATE
+    window, area = view3d()
+    arm = bpy.data.objects["Walker"]
+    wm = bpy.context.window_manager
+    if state["step"] == 0:
+        arm.mocap_gapfill.gap_index = 0
+        frame_view(100)
+        state["step"] = 0.5
+        return 1.0
+    if state["step"] == 0.5:
+        shot("1_gaps_detected")
+        with bpy.context.temp_override(window=window, area=area):
+            result = bpy.ops.mocap_gapfill.fill_gaps("INVOKE_DEFAULT", scope="ALL")
+        say("fill invoked:", result)
+        state["step"] = 1
+        return 0.05
+    if state["step"] == 1:
+        if wm.mocap_gapfill.running:
+            say(f"progress {wm.mocap_gapfill.progress:.0f} % {wm.mocap_gapfill.message}")
+            return 0.05
+        say("filled; showing", arm.mocap_gapfill.showing, "gaps filled:",
+            sum(g.filled for g in arm.mocap_gapfill.gaps), "of", len(arm.mocap_gapfill.gaps))
+        frame_view(130)
+        state["step"] = 2
+        return 1.0
+    if state["step"] == 2:
+        shot("2_filled")
+        with bpy.context.temp_override(window=window, area=area):
+            bpy.ops.mocap_gapfill.ghost()
+        say("ghost of original:", bpy.data.objects.get("Walker (original)") is not None)
+        state["step"] = 3
+        return 1.0
+    shot("3_ghost")
+    bpy.ops.wm.quit_blender()
+    return None
+
+
+enable()
+if "build" in sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []:
+    build()
+else:
+    bpy.app.timers.register(step, first_interval=2.0)
