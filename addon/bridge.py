@@ -4,8 +4,10 @@ Two kinds of "take" live in a scene:
 
 - a **marker set**: an empty whose child empties carry location keys, one per marker (what
   :func:`import_markers` makes from a C3D). A frame without a key is a missing sample.
-- an **armature**: joint positions are the bone heads. A bone without keys on a frame has an
-  unknown rotation, so the joints below it are missing (:func:`..core.posing.points_missing`).
+- an **armature**: joint positions are the bone heads (a BVH import), or, for armatures our
+  ASF/AMC import makes (one bone per segment), the bone tails and the root's head. A bone
+  without keys on a frame has an unknown rotation, so the joints it and its descendants place are
+  missing (:func:`..core.posing.points_missing`).
 
 Positions go to the core in metres, Z up, world space (:func:`to_metres` gives the scale of an
 object's units). Keys are read and written with ``foreach_get`` / ``foreach_set`` on numpy
@@ -19,10 +21,11 @@ import bpy
 import numpy as np
 
 from ..core.motion import UNIT_SCALES, Motion, rigid_marker_pairs, skeleton_limbs, units_for_height
-from ..core.posing import points_missing, solve_pose
+from ..core.posing import bones_to_blame, points_missing, solve_pose, tail_handles
 from . import compat
 
 MARKER_SET = "mocap_gapfill_marker_set"  # custom property on the parent empty of a marker set
+TAILS = "mocap_gapfill_tails"  # custom property of armatures whose joints are bone tails
 ROTATION_PATHS = {"QUATERNION": ("rotation_quaternion", 4), "AXIS_ANGLE": ("rotation_axis_angle", 4)}
 
 
@@ -192,14 +195,19 @@ def read_armature(obj, scene):
     parents = tuple(index[b.parent.name] if b.parent else -1 for b in bones)
     n = len(names)
     frames = last - first + 1
+    tails = bool(obj.get(TAILS))
     heads = np.empty((frames, n, 3))
     basis = np.empty((frames, n, 4, 4))
     keep = scene.frame_current
     buf = np.empty(n * 3, dtype=np.float32)
+    ends = np.array([tails and p >= 0 for p in parents])
     for f in range(frames):
         scene.frame_set(first + f)
         bones.foreach_get("head", buf)
         heads[f] = buf.reshape(n, 3)
+        if tails:
+            bones.foreach_get("tail", buf)
+            heads[f, ends] = buf.reshape(n, 3)[ends]
         basis[f] = _matrices(bones, "matrix_basis", n)
     scene.frame_set(keep)
     curves = compat.fcurves(obj)
@@ -219,10 +227,13 @@ def read_armature(obj, scene):
     rest = _matrices(obj.data.bones, "matrix_local", n)
     rest_heads = rest[:, :3, 3] @ world[:3, :3].T
     height = float(np.ptp(rest_heads[:, 2])) if n > 1 else 0.0
+    lengths = np.empty(n, dtype=np.float32)
+    obj.data.bones.foreach_get("length", lengths)
     return Take(obj.name, "armature", first, names, pos, keyed, scene_fps(scene),
                 to_metres(obj.mocap_gapfill.units, height), world, parents,
                 extra={"rest": rest, "basis": basis, "moves": moves,
-                       "modes": tuple(b.rotation_mode for b in bones)})
+                       "modes": tuple(b.rotation_mode for b in bones),
+                       "handles": tail_handles(lengths, parents) if tails else None})
 
 
 def read_take(obj, scene):
@@ -232,25 +243,35 @@ def read_take(obj, scene):
     return read_markers(owner, scene) if owner.type == "EMPTY" else read_armature(owner, scene)
 
 
+def _placed_by_own_bone(take):
+    """Which joints move with their own bone's rotation (tails) or location (moving heads)."""
+    if take.extra["handles"] is not None:
+        return np.ones(len(take.points), dtype=bool)
+    return take.extra["moves"]
+
+
 def missing_points(take, gap_mask):
     """Point samples unknown under per-point gaps (markers) or per-bone gaps (armatures)."""
     if take.kind == "armature":
-        return points_missing(gap_mask, take.parents, take.extra["moves"])
+        return points_missing(gap_mask, take.parents, _placed_by_own_bone(take))
     return gap_mask.copy()
 
 
+def blame_bones(take, suspect):
+    """Bone gaps that explain suspect joint samples of an armature."""
+    if take.extra["handles"] is not None:  # a tail moves with its own bone only
+        return suspect.copy()
+    return bones_to_blame(suspect, take.parents, take.extra["moves"])
+
+
 def unkeyed(take):
-    """Samples with no key inside the take's range: markers never keyed there, and, for bones
-    that are animated at all, frames between keys (leaf bones move no joint and are skipped)."""
+    """Samples with no key inside the take's range: markers never keyed there; bones without
+    keys on frames (over the whole range for a bone never keyed while others are), skipping
+    bones whose rotation places no joint (leaf bones of a BVH armature)."""
     gaps = ~take.keyed
     if take.kind == "armature":
-        animated = take.keyed.any(axis=0)
-        has_child = np.zeros(len(take.points), dtype=bool)
-        for p in take.parents:
-            if p >= 0:
-                has_child[p] = True
-        # a bone keyed nowhere is a gap over the whole range only if its siblings are animated
-        gaps &= has_child & (animated | take.keyed.any())
+        places = np.isin(np.arange(len(take.points)), take.parents) | _placed_by_own_bone(take)
+        gaps &= places & take.keyed.any()
     return gaps
 
 
@@ -322,7 +343,7 @@ def solve_armature(take, filled, bone_gaps):
     targets = (filled / take.metres) @ world_inv[:3, :3].T + world_inv[:3, 3]
     moves = take.extra["moves"]
     basis, pose = solve_pose(take.extra["rest"], take.parents, take.extra["basis"], targets,
-                             bone_gaps, bone_gaps & moves)
+                             bone_gaps, bone_gaps & moves, take.extra["handles"])
     return basis, pose
 
 
@@ -427,34 +448,34 @@ def set_scene_timing(scene, fps, first, last):
 
 
 def import_armature(context, motion, name, first_frame=1):
-    """Make an armature from a skeleton :class:`Motion` (e.g. ASF/AMC): bones from each joint to
-    its first child, rest pose = the first complete frame, root location and all rotations
-    keyed per frame so the bone heads follow the joints."""
+    """Make an armature from a skeleton :class:`Motion` (e.g. ASF/AMC): one bone per segment,
+    from the parent joint (head) to the joint (tail), plus a short root bone at the root; rest
+    pose = the first complete frame; root location and every rotation keyed per frame, so the
+    tails follow the joints exactly (joints with several children, like the CMU thorax, need a
+    bone per child: one bone per joint could not place them all)."""
     complete = np.flatnonzero(~motion.missing.any(axis=1))
     if motion.parents is None or not len(complete):
         raise ValueError("importing as an armature needs a skeleton with a complete frame")
     rest_pos = motion.positions[complete[0]]
     arm = bpy.data.armatures.new(name)
     obj = _link(context, bpy.data.objects.new(name, arm))
+    obj[TAILS] = True
     obj.mocap_gapfill.units = "M"
-    children = {j: [c for c, p in enumerate(motion.parents) if p == j]
-                for j in range(motion.n_points)}
     previous_active = context.view_layer.objects.active
     context.view_layer.objects.active = obj
     bpy.ops.object.mode_set(mode="EDIT")
     for j, label in enumerate(motion.names):
         bone = arm.edit_bones.new(label)
-        bone.head = rest_pos[j]
-        kids = [c for c in children[j] if np.linalg.norm(rest_pos[c] - rest_pos[j]) > 1e-4]
-        if kids:
-            tail = rest_pos[kids[0]]
-        else:
-            p = motion.parents[j]
-            direction = rest_pos[j] - rest_pos[p] if p >= 0 else np.array([0.0, 0.0, 1.0])
-            length = np.linalg.norm(direction)
-            direction = direction / length if length > 1e-6 else np.array([0.0, 0.0, 1.0])
-            tail = rest_pos[j] + 0.05 * direction
-        bone.tail = tail
+        p = motion.parents[j]
+        if p < 0:
+            bone.head, bone.tail = rest_pos[j], rest_pos[j] + np.array([0.0, 0.0, 0.1])
+            continue
+        bone.head = rest_pos[p]
+        step = rest_pos[j] - rest_pos[p]
+        # a zero-length segment still needs a direction: 0.1 mm along the parent's
+        bone.tail = rest_pos[j] if np.linalg.norm(step) > 1e-4 else rest_pos[p] + 1e-4 * (
+            _unit(rest_pos[p] - rest_pos[motion.parents[p]]) if motion.parents[p] >= 0
+            else np.array([0.0, 0.0, 1.0]))
     for j, p in enumerate(motion.parents):
         if p >= 0:
             arm.edit_bones[j].parent = arm.edit_bones[p]
@@ -462,23 +483,28 @@ def import_armature(context, motion, name, first_frame=1):
     context.view_layer.objects.active = previous_active
     for pbone in obj.pose.bones:
         pbone.rotation_mode = "QUATERNION"
-    action = bpy.data.actions.new(name)
-    compat.assign_action(obj, action)
+    compat.assign_action(obj, bpy.data.actions.new(name))
     n = motion.n_points
     rest = _matrices(arm.bones, "matrix_local", n)
+    lengths = np.empty(n, dtype=np.float32)
+    arm.bones.foreach_get("length", lengths)
+    handles = tail_handles(lengths, motion.parents)
     reference = np.broadcast_to(np.eye(4), (motion.n_frames, n, 4, 4))
     present = ~motion.missing
-    rotate = np.zeros_like(present)
-    for j in range(n):
-        rotate[:, j] = present[:, children[j]].all(axis=1) if children[j] else False
-    translate = np.zeros_like(present)
-    translate[:, [j for j, p in enumerate(motion.parents) if p < 0]] = True
-    basis, _ = solve_pose(rest, motion.parents, reference, motion.positions, rotate,
-                          translate & present)
+    roots = np.array([p < 0 for p in motion.parents])
+    rotate = present & ~roots
+    translate = present & roots
+    basis, _ = solve_pose(rest, motion.parents, reference, motion.positions, rotate, translate,
+                          handles)
     take = Take(obj.name, "armature", first_frame, motion.names, motion.positions, present,
                 motion.fps, 1.0, np.eye(4), motion.parents,
-                extra={"rest": rest, "basis": reference, "moves": translate.any(axis=0),
-                       "modes": tuple("QUATERNION" for _ in range(n))})
-    write_armature(take, basis, rotate | (translate & present), recovered=False)
+                extra={"rest": rest, "basis": reference, "moves": roots,
+                       "modes": tuple("QUATERNION" for _ in range(n)), "handles": handles})
+    write_armature(take, basis, rotate | translate, recovered=False)
     set_scene_timing(context.scene, motion.fps, first_frame, first_frame + motion.n_frames - 1)
     return obj
+
+
+def _unit(v):
+    length = np.linalg.norm(v)
+    return v / length if length > 1e-9 else np.array([0.0, 0.0, 1.0])

@@ -11,7 +11,6 @@ import numpy as np
 
 from ..core.errors import GapFillError
 from ..core.motion import gap_runs
-from ..core.posing import bones_to_blame
 from ..core.suspect import find_suspects
 from . import bridge, prefs
 
@@ -65,7 +64,7 @@ def detect(owner, scene, suspects=True, jump_factor=8.0):
         flagged = find_suspects(motion.positions, motion.fps, motion.limbs,
                                 jump_factor=jump_factor)
         if take.kind == "armature":
-            flagged = bones_to_blame(flagged, take.parents, take.extra["moves"])
+            flagged = bridge.blame_bones(take, flagged)
         suspect = flagged & ~missing
     settings = owner.mocap_gapfill
     marked = [(g.point, g.first, g.last, g.kind, g.filled) for g in settings.gaps
@@ -115,14 +114,13 @@ def update_stats(owner, points, first, frames):
         item.longest = max(b - a + 1 for _, a, b in runs)
 
 
-def gap_mask(gaps, points, first, frames, max_gap=0):
-    """(frames, points) mask of the listed gaps inside the take's range (gaps longer than
-    ``max_gap`` frames left out when it is > 0)."""
+def gap_mask(gaps, points, first, frames):
+    """(frames, points) mask of the listed gaps inside the take's range."""
     index = {n: j for j, n in enumerate(points)}
     mask = np.zeros((frames, len(points)), dtype=bool)
     for gap in gaps:
         j = index.get(gap.point)
-        if j is None or (max_gap and gap.last - gap.first + 1 > max_gap):
+        if j is None:
             continue
         a, b = max(gap.first - first, 0), min(gap.last - first, frames - 1)
         if a <= b:
@@ -177,18 +175,23 @@ def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, 
             continue
         take = read_original(owner, context.scene)
         frames = take.positions.shape[0]
-        chosen = [settings.gaps[settings.gap_index]] if only_active else list(settings.gaps)
         if only_active and not 0 <= settings.gap_index < len(settings.gaps):
             raise GapFillError(f"'{owner.name}': select a gap in the list first")
-        ids = [i for i, g in enumerate(settings.gaps) if g in chosen]
-        write = gap_mask(chosen, take.points, take.first, frames, max_gap)
+        ids = [settings.gap_index] if only_active else range(len(settings.gaps))
+        ids = [i for i in ids if not max_gap
+               or settings.gaps[i].last - settings.gaps[i].first + 1 <= max_gap]
+        if not ids:
+            continue
+        chosen = [settings.gaps[i] for i in ids]
+        write = gap_mask(chosen, take.points, take.first, frames)
         every = gap_mask(settings.gaps, take.points, take.first, frames) | bridge.unkeyed(take)
         missing = bridge.missing_points(take, every)
         if take.kind == "markers":
             write &= missing
         plans.append(FillPlan(owner.name, take, write, missing, ids))
     if not plans:
-        raise GapFillError("no gaps to fill: detect or mark gaps first")
+        raise GapFillError("no gaps to fill: detect or mark gaps first"
+                           + (f" (or raise Max gap above {max_gap})" if max_gap else ""))
     knn = KnnSettings(k=k or None)
 
     def work(progress, should_cancel):

@@ -96,8 +96,26 @@ def _local_rest(rest, parents):
     return np.stack([rest[b] if p < 0 else inv[p] @ rest[b] for b, p in enumerate(parents)])
 
 
-def solve_pose(rest, parents, reference, targets, rotate, translate):
-    """Basis matrices whose bone heads reach ``targets``.
+def child_handles(rest, parents):
+    """Per bone, the points its rotation places when joints are bone heads (a BVH armature):
+    ``[(offset in the bone's rest frame, child index), ...]`` for children not at its head."""
+    rest = np.asarray(rest, dtype=float)
+    local = _local_rest(rest, parents)
+    return [[(local[c][:3, 3], c) for c, p in enumerate(parents) if p == b
+             and np.linalg.norm(local[c][:3, 3]) > 1e-6 * (1 + np.abs(rest[b][:3, 3]).max())]
+            for b in range(len(parents))]
+
+
+def tail_handles(lengths, parents):
+    """Per bone, the point its rotation places when joints are bone tails (one bone per
+    segment, as our ASF/AMC import builds): its own tail, ``(0, length, 0)`` in its frame;
+    roots place nothing (their joint is their head)."""
+    return [[] if p < 0 else [(np.array([0.0, float(length), 0.0]), b)]
+            for b, (length, p) in enumerate(zip(lengths, parents))]
+
+
+def solve_pose(rest, parents, reference, targets, rotate, translate, handles=None):
+    """Basis matrices whose bones place their points on ``targets``.
 
     Parameters
     ----------
@@ -114,6 +132,9 @@ def solve_pose(rest, parents, reference, targets, rotate, translate):
         Solve the rotation of bone ``b`` at frame ``f`` (from its children's targets).
     translate : ndarray, shape (frames, bones), bool
         Solve the location of bone ``b`` at frame ``f`` so its head reaches its own target.
+    handles : list, optional
+        What each bone's rotation places (:func:`child_handles`, the default: joints are heads;
+        or :func:`tail_handles`: joints are tails).
 
     Returns
     -------
@@ -127,9 +148,7 @@ def solve_pose(rest, parents, reference, targets, rotate, translate):
     rotate = np.asarray(rotate, dtype=bool) & np.isfinite(targets[..., 0]).any(axis=1)[:, None]
     translate = np.asarray(translate, dtype=bool) & np.isfinite(targets[..., 0])
     local = _local_rest(rest, parents)
-    children = [[c for c, p in enumerate(parents) if p == b
-                 and np.linalg.norm(local[c][:3, 3]) > 1e-6 * (1 + np.abs(rest[b][:3, 3]).max())]
-                for b in range(len(parents))]
+    handles = child_handles(rest, parents) if handles is None else handles
     pose = np.empty(basis.shape)
     for b in order_bones(parents):
         p = parents[b]
@@ -140,13 +159,13 @@ def solve_pose(rest, parents, reference, targets, rotate, translate):
             offset = targets[frames, b] - above[frames, :3, 3]
             basis[frames, b, :3, 3] = np.linalg.solve(rot_above[frames], offset[..., None])[..., 0]
         head = (above @ basis[:, b])[:, :3, 3]
-        kids = [c for c in children[b]]
+        kids = [c for _, c in handles[b]]
         frames = rotate[:, b] & np.isfinite(targets[:, kids, 0]).all(axis=1) if kids else None
         if kids and frames.any():
             ref = basis[frames, b, :3, :3]
-            # children offsets under the reference rotation, and where they should point,
-            # both in the frame of the bone's parent space (rotation part of ``above``)
-            now = np.einsum("fij,cj->fci", ref, np.stack([local[c][:3, 3] for c in kids]))
+            # the placed points' offsets under the reference rotation, and where they should
+            # point, both in the frame above the bone (rotation part of ``above``)
+            now = np.einsum("fij,cj->fci", ref, np.stack([offset for offset, _ in handles[b]]))
             want = np.linalg.solve(rot_above[frames][:, None],
                                    (targets[frames][:, kids] - head[frames][:, None])[..., None])
             want = want[..., 0]

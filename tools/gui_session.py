@@ -108,6 +108,16 @@ def step():
             return 0.05
         say("filled; showing", arm.mocap_gapfill.showing, "gaps filled:",
             sum(g.filled for g in arm.mocap_gapfill.gaps), "of", len(arm.mocap_gapfill.gaps))
+        with bpy.context.temp_override(window=window, area=area):
+            bpy.ops.ed.undo()
+        arm = bpy.data.objects["Walker"]
+        say("after one Ctrl-Z: showing", arm.mocap_gapfill.showing, "recovered action:",
+            arm.mocap_gapfill.recovered_action, "action:", arm.animation_data.action.name)
+        with bpy.context.temp_override(window=window, area=area):
+            bpy.ops.ed.redo()
+        arm = bpy.data.objects["Walker"]
+        say("after redo: showing", arm.mocap_gapfill.showing, "action:",
+            arm.animation_data.action.name)
         frame_view(130)
         state["step"] = 2
         return 1.0

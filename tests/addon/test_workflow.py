@@ -326,3 +326,63 @@ def daz_armature_name(path):
     import bpy
 
     return next(o.name for o in bpy.data.objects if o.type == "ARMATURE")
+
+
+def test_asf_amc_import_follows_the_joints(scene, data_dir):
+    """Our ASF/AMC import: an armature whose bone heads are the file's joints (Blender's own
+    evaluation), rest pose from the first frame, rotations keyed per frame."""
+    from mocap_gapfill.core.io import read_motion
+
+    bpy = pytest.importorskip("bpy")
+    bridge, _, _, _ = modules()
+    amc = data_dir / "cmu/asfamc/01/01_01.amc"
+    assert bpy.ops.mocap_gapfill.import_skeleton(filepath=str(amc)) == {"FINISHED"}
+    arm = bpy.context.active_object
+    assert arm.type == "ARMATURE" and len(arm.pose.bones) == 31
+    assert len(arm.mocap_gapfill.gaps) == 0  # complete take, nothing flagged
+    take = bridge.read_take(arm, scene)
+    truth = read_motion(amc).select(list(take.points))
+    assert take.positions.shape == truth.positions.shape  # 2,751 frames
+    error_mm = np.abs(take.positions - truth.positions).max() * 1000
+    print(f"\n01_01.amc imported: bone heads vs ASF/AMC joints max {error_mm:.3f} mm")
+    assert error_mm < 1.0
+
+
+def test_kb_built_from_a_take_and_a_cancelled_fill_changes_nothing(scene):
+    """Build a KB from the selected take (operator, saved in the user folder), then a fill whose
+    work is cancelled: nothing written."""
+    bpy = pytest.importorskip("bpy")
+    bridge, compat, gaps, _ = modules()
+    import importlib
+
+    synth = importlib.import_module(f"{LOCAL_MODULE}.core.synth")
+    skeleton, _ = synth.take(synth.KB_GAITS[2], frames=240)
+    arm = bridge.import_armature(bpy.context, skeleton, "Jogger")
+    compat.select_objects(bpy.context, [arm], active=arm)
+    assert bpy.ops.mocap_gapfill.build_kb(source="TAKE", name="jog") == {"FINISHED"}
+    path = scene.mocap_gapfill.kb_path
+    assert path.endswith("knowledge_bases/jog.npz") and "extensions" in path
+    kb = gaps.load_kb_cached(path)
+    assert kb.size == 240 and set(kb.names) == set(skeleton.names)
+
+    remove_bone_keys(arm, [("LeftForeArm", 50, 120)])
+    bpy.ops.mocap_gapfill.detect_gaps()
+    action = arm.animation_data.action
+    plans, work = gaps.plan_fill(bpy.context, [arm], kb=kb)
+    with pytest.raises(KeyboardInterrupt):
+        work(lambda fraction, message: None, lambda: True)
+    assert arm.animation_data.action == action and arm.mocap_gapfill.recovered_action is None
+    assert not any(g.filled for g in arm.mocap_gapfill.gaps)
+
+
+def test_max_gap_leaves_long_gaps_alone(daz_armature, daz_kb):
+    bpy = pytest.importorskip("bpy")
+    arm, scene = daz_armature, bpy.context.scene
+    remove_bone_keys(arm, BONE_GAPS)  # 100, 90 and 60 frames
+    scene.mocap_gapfill.detect_suspects = False
+    bpy.ops.mocap_gapfill.detect_gaps()
+    scene.mocap_gapfill.kb_path = str(daz_kb)
+    scene.mocap_gapfill.max_gap = 80
+    assert bpy.ops.mocap_gapfill.fill_gaps() == {"FINISHED"}
+    filled = {g.point for g in arm.mocap_gapfill.gaps if g.filled}
+    assert filled == {"chest"}
