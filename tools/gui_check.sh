@@ -15,7 +15,8 @@ if [ ! -x "$ROOTFS/usr/bin/apt-get" ]; then
   debootstrap --variant=minbase "$SUITE" "$ROOTFS" http://deb.debian.org/debian
 fi
 if ! chroot "$ROOTFS" dpkg -s $PACKAGES >/dev/null 2>&1; then
-  chroot "$ROOTFS" apt-get update -q
+  # a mirror snapshot may be older than the Release file's validity (seen with sid here)
+  chroot "$ROOTFS" apt-get -o Acquire::Check-Valid-Until=false update -q
   chroot "$ROOTFS" env DEBIAN_FRONTEND=noninteractive apt-get install -y -q \
     --no-install-recommends $PACKAGES
 fi

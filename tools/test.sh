@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
-# The test command: set up (idempotent), then run the whole suite on bpy 5.0 and the add-on
-# tests again on bpy 4.2 LTS. Data comes from ../shared/data (MOCAP_GAPFILL_DATA overrides).
+# The test command: set up (idempotent), then run the add-on tests on bpy 4.2 LTS (Python 3.11)
+# and the whole suite on bpy 5.2 (Python 3.13, numpy 2) and bpy 5.0 (Python 3.11, numpy 1).
+# Data comes from ../shared/data (MOCAP_GAPFILL_DATA overrides).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
 export MOCAP_GAPFILL_REQUIRE_DATA=1 MOCAP_GAPFILL_REQUIRE_BPY=1
-echo "== bpy 4.2 LTS: add-on tests"
+echo "== bpy 4.2 LTS (Python 3.11): add-on tests"
 .venv42/bin/python -m pytest -q -p no:cacheprovider tests/addon
-echo "== bpy 5.0: all tests"
+echo "== bpy 5.2 (Python 3.13): all tests"
+.venv52/bin/python -m pytest -q -p no:cacheprovider tests
+echo "== bpy 5.0 (Python 3.11): all tests"
 .venv/bin/python -m pytest -q -p no:cacheprovider tests "$@"

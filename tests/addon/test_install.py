@@ -55,7 +55,9 @@ def test_split_platform_zips(built):
     assert "addon/operators.py" in names and "__init__.py" in names
     assert not [n for n in names if n.startswith(("tests/", ".ci/", ".venv", "tools/", "docs/"))]
     wheels = [n for n in names if n.endswith(".whl")]
-    assert len(wheels) == 2 and all("linux" in w for w in wheels)  # scipy + ezc3d, linux only
+    # scipy + ezc3d for Python 3.11 (Blender 4.2-5.0) and 3.13 (5.1+), linux only
+    assert len(wheels) == 4 and all("linux" in w for w in wheels)
+    assert sorted(w.split("-")[2] for w in wheels) == ["cp311", "cp311", "cp313", "cp313"]
     assert not any("numpy" in n for n in names)  # numpy comes with Blender
 
 
