@@ -52,7 +52,8 @@ def run(args, report=print):
         report(f"{owner.name}: {len(owner.mocap_gapfill.gaps)} gaps")
     owners = [o for o in owners if len(o.mocap_gapfill.gaps)]
     if owners:
-        plans, work = gaps.plan_fill(context, owners, False, args.method, args.K, args.max_gap, kb)
+        plans, work = gaps.plan_fill(context, owners, False, args.method, args.K, args.max_gap, kb,
+                                     args.device)
 
         def progress(fraction, message):
             report(f"{100 * fraction:3.0f} % {message}")

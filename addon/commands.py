@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.backend import DEVICES
 from ..core.demo import BONE_GAPS
 
 
@@ -33,6 +34,8 @@ def add_arguments(parser, with_input=False):
     parser.add_argument("--max-gap", type=int, default=0, help="leave longer gaps unfilled")
     parser.add_argument("--no-suspects", action="store_true",
                         help="do not treat jumping or stretching keys as gaps")
+    parser.add_argument("--device", default="auto", choices=DEVICES,
+                        help="where the knn search runs (torch is optional)")
 
 
 def cmd_demo(args):

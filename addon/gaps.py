@@ -159,7 +159,8 @@ class FillPlan:
     gap_ids: list  # indices into the owner's gap list that this fill covers
 
 
-def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, kb=None):
+def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, kb=None,
+              device="auto"):
     """Read the takes and return ``(plans, work)``: ``work(progress, should_cancel)`` fills them
     on plain arrays and returns per plan the filled positions (and, for armatures, the solved
     basis matrices)."""
@@ -192,7 +193,7 @@ def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, 
     if not plans:
         raise GapFillError("no gaps to fill: detect or mark gaps first"
                            + (f" (or raise Max gap above {max_gap})" if max_gap else ""))
-    knn = KnnSettings(k=k or None)
+    knn = KnnSettings(k=k or None, device=device)
 
     def work(progress, should_cancel):
         results = []

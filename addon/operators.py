@@ -248,7 +248,8 @@ class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
             kb = gaps.load_kb_cached(path)
             prefs.remember_kb(path, context)
         self._plans, work = gaps.plan_fill(context, owners, self.scope == "SELECTED",
-                                           settings.method, settings.k, settings.max_gap, kb)
+                                           settings.method, settings.k, settings.max_gap, kb,
+                                           prefs.device(context))
         return work
 
     def finish(self, context, results):

@@ -7,7 +7,7 @@ Knowledge bases built in Blender are saved in the extension's user folder
 from pathlib import Path
 
 import bpy
-from bpy.props import CollectionProperty, StringProperty
+from bpy.props import CollectionProperty, EnumProperty, StringProperty
 
 ADDON = __package__.rpartition(".")[0]  # the extension's module, e.g. bl_ext.user_default.x
 MAX_RECENT = 8
@@ -27,10 +27,18 @@ class MOCAP_GAPFILL_AP_preferences(bpy.types.AddonPreferences):
     default_kb: StringProperty(name="Default knowledge base", subtype="FILE_PATH",
                                description="Used when a scene names no knowledge base")
     recent: CollectionProperty(type=MOCAP_GAPFILL_PG_recent)
+    device: EnumProperty(name="Compute on", default="auto", items=(
+        ("auto", "Automatic", "A CUDA GPU through PyTorch when there is one, else PyTorch on the "
+                              "CPU, else numpy (PyTorch is optional: install it into Blender's "
+                              "Python to use it)"),
+        ("numpy", "NumPy", "numpy and scipy only"),
+        ("cpu", "PyTorch CPU", "PyTorch on the CPU"),
+        ("cuda", "PyTorch CUDA", "PyTorch on a CUDA GPU")))
 
     def draw(self, context):
         layout = self.layout
         layout.prop(self, "default_kb")
+        layout.prop(self, "device")
         layout.label(text=f"Knowledge bases you build are saved in {kb_folder(create=False)}")
         if self.recent:
             col = layout.column(align=True)
@@ -43,6 +51,11 @@ def get(context=None):
     """The preferences, or None when the add-on runs without being installed (bpy module)."""
     addon = (context or bpy.context).preferences.addons.get(ADDON)
     return addon.preferences if addon else None
+
+
+def device(context=None):
+    prefs = get(context)
+    return prefs.device if prefs else "auto"
 
 
 def kb_folder(create=True):

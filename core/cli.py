@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import GapFillError
+from .backend import DEVICES
 from .fill import METHODS
 from .io import READ_FORMATS, WRITE_FORMATS, read_motion, write_motion
 from .motion import UNIT_SCALES
@@ -143,8 +144,8 @@ def cmd_fill(args):
                            "(make one with 'mocap-gapfill kb build')")
     progress = Progress(args.quiet)
     kept = _long_gaps(motion, args.max_gap) if args.max_gap else None
-    out = fill(motion, args.method, kb=kb, settings=KnnSettings(k=args.k), progress=progress,
-               report=_report)
+    out = fill(motion, args.method, kb=kb, settings=KnnSettings(k=args.k, device=args.device),
+               progress=progress, report=_report)
     progress.done()
     if kept is not None:
         out = out.replace(positions=np.where(kept[..., None], np.nan, out.positions),
@@ -193,6 +194,16 @@ def cmd_demo(args):
     return 0
 
 
+def cmd_bench(args):
+    from .bench import run
+
+    out = run(quick=args.quick, repeat=args.repeat)
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1))
+        print(f"wrote {args.json}")
+    return 0
+
+
 def build_parser(extra=None):
     parser = argparse.ArgumentParser(
         prog="mocap-gapfill",
@@ -236,6 +247,9 @@ def build_parser(extra=None):
                    help="neighbours per frame (knn; default 1024, or the KB size if smaller)")
     p.add_argument("--max-gap", type=int, metavar="FRAMES",
                    help="leave gaps longer than this unfilled")
+    p.add_argument("--device", default="auto", choices=DEVICES,
+                   help="knn search and models: auto (torch on a CUDA GPU, else torch on the CPU, "
+                        "else numpy), numpy, cpu (torch), cuda (torch)")
     p.add_argument("--force", action="store_true", help="replace the output if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     _add_read_options(p)
@@ -260,6 +274,13 @@ def build_parser(extra=None):
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("bench", help="speed of search, local models and fill per backend "
+                                     "(numpy, torch CPU/CUDA, cKDTree): medians and ratios")
+    p.add_argument("--quick", action="store_true", help="the 65k-pose / 2k-frame cases only")
+    p.add_argument("--repeat", type=int, default=3, help="runs per case (median)")
+    p.add_argument("--json", metavar="OUT", help="write the results as JSON")
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("demo", help="fill synthetic takes with gaps (offline) and show the "
                                     "accuracy on known truth")

@@ -91,10 +91,13 @@ class KnnSettings:
     query_noise: object = "auto"
     max_iterations: int = 20
     batch_frames: int = 256
+    #: where the search and the local models' products run: "auto" (torch on a CUDA GPU, else
+    #: torch on the CPU, else numpy when torch is absent), "numpy", "cpu" or "cuda" (torch)
+    device: str = "auto"
     random_state: int = 0
 
 
-def _local_pca(neighbours, settings, rng):
+def _local_pca(neighbours, settings, rng, backend):
     """Top principal components of each frame's neighbours (batched subspace iteration).
 
     neighbours: (t, k, d), float32 or float64. Returns mean (t, d), components (t, d, r) with
@@ -104,7 +107,7 @@ def _local_pca(neighbours, settings, rng):
     t, k, d = neighbours.shape
     mean = neighbours.mean(axis=1, dtype=np.float64)
     a = neighbours - mean[:, None, :].astype(neighbours.dtype)
-    cov = (a.transpose(0, 2, 1) @ a).astype(np.float64) / max(1, k - 1)
+    cov = backend.gram(a) / max(1, k - 1)
     total = np.trace(cov, axis1=1, axis2=2)
     r = min(settings.max_components, d, k - 1)
     y = cov @ rng.standard_normal((d, min(d, r + OVERSAMPLE)))
@@ -249,7 +252,8 @@ def _noise_factor(obs_norm, model, frames, index, settings, rng):
     rows, hidden = np.array(rows), np.array(hidden)
     mask = model[rows] | hidden
     idx, dist2 = index.search(obs_norm[rows], ~mask, settings.k, ordered=False)
-    means, comps, lams, noise = _local_pca(index.poses.reshape(index.n, -1)[idx], settings, rng)
+    means, comps, lams, noise = _local_pca(index.poses.reshape(index.n, -1)[idx], settings, rng,
+                                            index.backend)
     n = mask.shape[1]
     present = (~mask).sum(axis=1)
     spread = ((n - present) / n) * np.median(dist2, axis=1) / (3 * np.maximum(present, 1))
@@ -297,7 +301,7 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
     elif settings.k > kb.size:
         raise GapFillError(f"K = {settings.k} is larger than the knowledge base ({kb.size} poses)")
     name_to = {nm: i for i, nm in enumerate(common)}
-    index = KBIndex(kb.poses[:, kb_cols])
+    index = KBIndex(kb.poses[:, kb_cols], settings.device)
     limbs = np.asarray([(name_to[kb.names[a]], name_to[kb.names[b]]) for a, b in kb.limbs
                         if kb.names[a] in name_to and kb.names[b] in name_to], dtype=np.int64)
     limbs = limbs.reshape(-1, 2)
@@ -372,7 +376,8 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
         sel = frames[rows]
         idx, dist2 = index.search(obs_norm[sel], ~model[sel], settings.k, ordered=False)
         neighbours = flat_kb[idx]  # float32: the covariance is summed in float32, then float64
-        means[rows], comps[rows], lams[rows], noise[rows] = _local_pca(neighbours, settings, rng)
+        means[rows], comps[rows], lams[rows], noise[rows] = _local_pca(neighbours, settings, rng,
+                                                                       index.backend)
         # how far the query lies from its neighbours, per coordinate, times the missing share:
         # with a noise level far below it the components chase that difference and may
         # extrapolate wildly into the missing points (see docs/METHOD_NOTES.md)

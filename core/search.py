@@ -12,10 +12,9 @@ the brute-force float64 oracle (:func:`knn_oracle`) up to ties and float32 round
 
 import numpy as np
 
+from .backend import resolve
 from .errors import GapFillError
 
-#: memory for one block of the distance matrix, in bytes
-BLOCK_BYTES = 32 << 20
 #: extra candidates re-ranked in float64 beyond K, absorbing float32 rounding
 MARGIN = 16
 
@@ -27,9 +26,11 @@ class KBIndex:
     ----------
     poses : ndarray, shape (n, points, 3)
         Normalised knowledge-base poses (no NaN).
+    device : str
+        Where the distance products run (:data:`~mocap_gapfill.core.backend.DEVICES`).
     """
 
-    def __init__(self, poses):
+    def __init__(self, poses, device="auto"):
         poses = np.asarray(poses)
         if poses.ndim != 3 or poses.shape[2] != 3 or not len(poses):
             raise GapFillError(f"knowledge-base poses must be (n, points, 3), got {poses.shape}")
@@ -38,7 +39,7 @@ class KBIndex:
         flat = poses.reshape(self.n, -1).astype(np.float32)
         sq = (poses.astype(np.float64) ** 2).sum(axis=2).astype(np.float32)
         # the matrix every query block multiplies: [k, |k_i|^2], transposed for a fast GEMM
-        self._rhs = np.ascontiguousarray(np.concatenate([flat, sq], axis=1).T)
+        self.backend = resolve(device).prepare(np.concatenate([flat, sq], axis=1).T)
         self._flat = flat
 
     def search(self, queries, present, k, ordered=True, progress=None, should_cancel=None):
@@ -84,30 +85,30 @@ class KBIndex:
         out_d2 = np.empty((len(q), k))
         lhs = np.concatenate([-2.0 * q.reshape(len(q), -1), present.astype(np.float32)], axis=1)
         qsq = (q.astype(np.float64) ** 2).sum(axis=(1, 2))
-        rows = max(1, BLOCK_BYTES // (4 * self.n))
+        rows = max(1, self.backend.block_bytes // (4 * self.n))
         for start in range(0, len(q), rows):
             if should_cancel and should_cancel():
                 raise KeyboardInterrupt
             sel = slice(start, start + rows)
-            d = lhs[sel] @ self._rhs  # (rows, n): squared distance minus |q|^2
+            # the smallest of lhs @ [k, |k_i|^2]^T: squared distances minus |q|^2
             if ordered:
-                cand = _smallest(d, min(self.n, k + MARGIN))
+                cand, _ = self.backend.smallest(lhs[sel], min(self.n, k + MARGIN))
                 # direct differences on the candidates (no cancellation), then the K in order
-                diff = self._flat[cand] - q[sel].reshape(len(d), 1, -1)
+                diff = self._flat[cand] - q[sel].reshape(len(cand), 1, -1)
                 diff *= np.repeat(present[sel], 3, axis=1)[:, None, :]
                 exact = np.einsum("qkd,qkd->qk", diff, diff, dtype=np.float64)
                 order = np.argsort(exact, axis=1, kind="stable")[:, :k]
                 out_idx[sel] = np.take_along_axis(cand, order, axis=1)
                 out_d2[sel] = np.take_along_axis(exact, order, axis=1)
             else:
-                out_idx[sel] = cand = _smallest(d, k)
-                out_d2[sel] = np.take_along_axis(d, cand, axis=1) + qsq[sel, None]
+                out_idx[sel], d = self.backend.smallest(lhs[sel], k)
+                out_d2[sel] = d + qsq[sel, None]
             if progress:
                 progress(min(len(q), start + rows) / len(q), "searching")
         return out_idx, out_d2
 
 
-def _smallest(d, k):
+def smallest_columns(d, k):
     """Column indices of the k smallest entries of each row (any order), exactly."""
     n = d.shape[1]
     if k >= n:
