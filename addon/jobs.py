@@ -52,8 +52,12 @@ class JobOperator:
 
     _job = None
     _timer = None
+    #: set by an invoke that opened the file browser: its execute then runs modal too
+    _modal_after_browser = False
 
     def execute(self, context):
+        if self._modal_after_browser and not bpy.app.background and context.window:
+            return self._start_modal(context)
         work = self._prepare(context)
         if work is None:
             return {"CANCELLED"}
@@ -77,6 +81,9 @@ class JobOperator:
     def invoke(self, context, event):
         if bpy.app.background:
             return self.execute(context)
+        return self._start_modal(context)
+
+    def _start_modal(self, context):
         work = self._prepare(context)
         if work is None:
             return {"CANCELLED"}

@@ -7,6 +7,7 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
 from ..core.errors import GapFillError
+from ..core.fill import NEEDS_KB
 from . import bridge, compat, gaps, prefs
 from .jobs import JobOperator
 
@@ -241,7 +242,7 @@ class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
         if not owners:
             raise GapFillError("select an armature or a marker set")
         kb = None
-        if settings.method in ("knn", "pca"):
+        if settings.method in NEEDS_KB:
             path = gaps.kb_path(context)
             if not path:
                 raise GapFillError("choose a knowledge base first (Mocap tab > Knowledge base)")
@@ -340,7 +341,8 @@ class MOCAP_GAPFILL_OT_build_kb(JobOperator, bpy.types.Operator):
                      description="Resample to this rate (0: the scene's)")
 
     def invoke(self, context, event):
-        if self.source == "FOLDER" and not self.directory:
+        if self.source == "FOLDER" and not self.directory and not bpy.app.background:
+            self._modal_after_browser = True  # the build runs modal once a folder is chosen
             context.window_manager.fileselect_add(self)
             return {"RUNNING_MODAL"}
         return JobOperator.invoke(self, context, event)

@@ -16,6 +16,8 @@ UNITS = (
     ("IN", "Inches", ""), ("CMU", "CMU units", "1/0.45 inch, the CMU ASF unit"),
 )
 METHOD_ITEMS = (
+    ("auto", "Automatic", "Per point, the better of the knowledge base and spline interpolation "
+                          "on copies of its gaps in this take"),
     ("knn", "Knowledge base", "Nearest poses in the knowledge base, local PCA and optimisation"),
     ("linear", "Linear", "Linear interpolation, for comparison"),
     ("spline", "Spline", "Cubic spline interpolation, for comparison"),
@@ -78,7 +80,7 @@ class MOCAP_GAPFILL_PG_scene(bpy.types.PropertyGroup):
 
     kb_path: StringProperty(name="Knowledge base", subtype="FILE_PATH",
                             description="Knowledge-base file (.npz) of clean motion")
-    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="knn")
+    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="auto")
     k: IntProperty(name="K", default=0, min=0, soft_max=4096,
                    description="Neighbours per frame (0: automatic, min(1024, poses))")
     max_gap: IntProperty(name="Max gap", default=0, min=0,

@@ -6,8 +6,12 @@ from . import baselines
 from .errors import GapFillError
 from .kb import match_names
 
-METHODS = ("knn", "linear", "spline", "svt", "pca", "intercorrelation")
-NEEDS_KB = ("knn", "pca")
+METHODS = ("knn", "auto", "linear", "spline", "svt", "pca", "intercorrelation")
+NEEDS_KB = ("knn", "auto", "pca")
+#: what ``auto`` chooses between, per point
+AUTO_CANDIDATES = ("knn", "spline")
+#: validation gaps per point for ``auto``
+AUTO_PROBES = 3
 
 
 def fill(motion, method="knn", kb=None, settings=None, progress=None, should_cancel=None,
@@ -40,6 +44,8 @@ def fill(motion, method="knn", kb=None, settings=None, progress=None, should_can
 
         return fill_knn(motion, kb, settings or KnnSettings(), progress=progress,
                         should_cancel=should_cancel, report=report)
+    if method == "auto":
+        return _fill_auto(motion, kb, settings, progress, should_cancel, report)
     if method == "pca":
         common, _ = match_names(kb, motion.names)
         sub = motion.select(common)
@@ -58,3 +64,88 @@ def fill(motion, method="knn", kb=None, settings=None, progress=None, should_can
     if motion.filled is not None:
         filled |= motion.filled
     return motion.replace(positions=out, filled=filled)
+
+
+def _fill_auto(motion, kb, settings, progress, should_cancel, report):
+    """Per point, the better of the knowledge-base fill and spline interpolation on this take.
+
+    Each gap is copied (same points, same length) to nearby frames where its point is observed;
+    both candidates fill those copies, and each point's gaps are filled by the candidate with the
+    smaller error on its copies (the knowledge base where a point has no copy; interpolation for
+    points the knowledge base lacks). The KB method
+    wins where the motion is fast or the gap long, interpolation where the motion is slow and the
+    KB holds no similar poses.
+    """
+    report = report or (lambda message: None)
+    progress = progress or (lambda fraction, message: None)
+    missing = motion.missing
+    probe = validation_gaps(missing, AUTO_PROBES)
+
+    def run(name, target, p0, p1):
+        step = (lambda f, m: progress(p0 + (p1 - p0) * f, m))
+        return fill(target, name, kb=kb, settings=settings, progress=step,
+                    should_cancel=should_cancel).positions
+
+    choice = np.zeros(motion.n_points, dtype=int)  # index into AUTO_CANDIDATES
+    if probe.any():
+        hidden = motion.replace(positions=np.where(probe[..., None], np.nan, motion.positions))
+        errors = []
+        for i, name in enumerate(AUTO_CANDIDATES):
+            out = run(name, hidden, 0.5 * i / len(AUTO_CANDIDATES),
+                      0.5 * (i + 1) / len(AUTO_CANDIDATES))
+            sq = np.sum((out - motion.positions) ** 2, axis=2)
+            # a candidate that leaves a copy unfilled (a point the KB lacks) cannot win there
+            errors.append(np.where(probe, np.nan_to_num(sq, nan=np.inf), 0.0).sum(axis=0))
+        errors = np.array(errors)
+        seen = probe.any(axis=0)
+        choice[seen] = np.argmin(errors[:, seen], axis=0)
+    results = [run(name, motion, 0.5 + 0.5 * i / len(AUTO_CANDIDATES),
+                   0.5 + 0.5 * (i + 1) / len(AUTO_CANDIDATES)) if (choice == i).any() or i == 0
+               else None for i, name in enumerate(AUTO_CANDIDATES)]
+    out = results[0].copy()
+    for i in range(1, len(AUTO_CANDIDATES)):
+        if results[i] is not None:
+            out[:, choice == i] = results[i][:, choice == i]
+    gappy = missing.any(axis=0)
+    for i, name in enumerate(AUTO_CANDIDATES):
+        points = [motion.names[p] for p in np.flatnonzero(gappy & (choice == i))]
+        if points:
+            report(f"auto: {name} for {len(points)} points ({', '.join(points[:8])}"
+                   f"{'...' if len(points) > 8 else ''})")
+    out = np.where(missing[..., None], out, motion.positions)
+    filled = missing & ~np.isnan(out[..., 0])
+    if motion.filled is not None:
+        filled |= motion.filled
+    return motion.replace(positions=out, filled=filled)
+
+
+def validation_gaps(missing, per_point=3, margin=10):
+    """Copies of the gaps where their points are observed: for each gap of each point, the
+    nearest shift (by at least the gap's length plus ``margin``) that lands on observed frames
+    with an observed frame on either side, at most ``per_point`` per point. A gap of several
+    points at the same frames lands at the same shift for all of them when it can."""
+    frames, points = missing.shape
+    probe = np.zeros_like(missing)
+    from .motion import gap_runs
+
+    runs = sorted(gap_runs(missing), key=lambda r: (r[1], r[2], r[0]))
+    count = np.zeros(points, dtype=int)
+    for p, a, b in runs:
+        if count[p] >= per_point:
+            continue
+        length = b - a + 1
+        step = length + margin
+        for k in range(1, frames // max(step, 1) + 2):
+            for start in (a + k * step, a - k * step):
+                lo, hi = start - 1, start + length + 1
+                if lo < 0 or hi > frames:
+                    continue
+                if missing[lo:hi, p].any() or probe[lo:hi, p].any():
+                    continue
+                probe[start:start + length, p] = True
+                count[p] += 1
+                break
+            else:
+                continue
+            break
+    return probe

@@ -1,5 +1,7 @@
 """The recovery engine on real data: normalisation, knowledge base, exact search, filling."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -193,3 +195,32 @@ def test_unordered_search_returns_the_same_neighbour_sets(daz_kb):
         assert exact.max() <= limit + 1e-5, (exact.max(), limit)
         assert len(set(got)) == 128
     np.testing.assert_allclose(np.sort(d_unordered, axis=1), d_ordered, rtol=1e-3, atol=1e-5)
+
+
+def test_auto_takes_the_better_method_per_point(daz_kb, data_dir):
+    """auto = per point the better of knn and spline on copies of the gaps: close to the better
+    of the two on a slow take with a bone gap (spline wins) and on a jump turn (knn wins)."""
+    from mocap_gapfill.core.fill import validation_gaps
+    from mocap_gapfill.core.posing import points_missing
+
+    slow = read_motion(data_dir / DAZ / "13/13_01.bvh.gz", skip_frames=6)
+    slow = slow.replace(positions=resample(slow.positions, slow.fps, 60.0), fps=60.0)
+    slow = slow.frame_range(0, 400)
+    gaps = np.zeros(slow.missing.shape, bool)
+    gaps[150:210, slow.names.index("chest")] = True  # the upper body below the chest
+    miss = points_missing(gaps, slow.parents, np.zeros(slow.n_points, bool))
+    probe = validation_gaps(miss)
+    assert not (probe & miss).any() and probe.sum() >= miss.sum()  # copies beside the gaps
+    cases = [(slow, miss, daz_kb)]
+    c3d = data_dir / "cmu/c3d"
+    jump = read_motion(c3d / "85_02.c3d")
+    miss2 = np.zeros(jump.missing.shape, bool)
+    for name, a, b in (("LELB", 100, 189), ("RKNE", 300, 389), ("LWRA", 400, 519)):
+        miss2[a:b + 1, jump.names.index(name)] = True
+    cases.append((jump, miss2, build_kb([c3d / "01_01.c3d", c3d / "135_02.c3d"])))
+    for truth, missing, kb in cases:
+        query = with_gaps(truth, missing)
+        scores = {m: rmse_mm(fill(query, m, kb=kb), truth, missing)
+                  for m in ("knn", "spline", "auto")}
+        print(f"\n{Path(truth.source).name}: {scores}")
+        assert scores["auto"] <= 1.1 * min(scores["knn"], scores["spline"])

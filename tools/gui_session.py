@@ -128,7 +128,25 @@ def step():
         say("ghost of original:", bpy.data.objects.get("Walker (original)") is not None)
         state["step"] = 3
         return 1.0
-    shot("3_ghost")
+    if state["step"] == 3:
+        shot("3_ghost")
+        # a knowledge base built modally from a folder of motion files (here the demo's output)
+        import glob
+        import os
+        import shutil
+
+        os.makedirs(f"{OUT}/takes", exist_ok=True)
+        for path in glob.glob(f"{OUT}/demo_markers_filled.*"):
+            shutil.copy(path, f"{OUT}/takes/")
+        with bpy.context.temp_override(window=window, area=area):
+            result = bpy.ops.mocap_gapfill.build_kb("INVOKE_DEFAULT", source="FOLDER",
+                                                    directory=f"{OUT}/takes", name="gui_check")
+        say("build_kb invoked:", result)
+        state["step"] = 4
+        return 0.1
+    if wm.mocap_gapfill.running:
+        return 0.1
+    say("knowledge base now:", bpy.context.scene.mocap_gapfill.kb_path)
     bpy.ops.wm.quit_blender()
     return None
 

@@ -1,6 +1,7 @@
 """Markdown tables from evaluation JSON files (mocap-gapfill evaluate --json).
 
-Usage: python tools/results_table.py docs/results/*.json
+Usage: python tools/results_table.py docs/results/*.json (bench.json from mocap-gapfill bench
+gives the speed tables)
 Per setting: mean RMSE over missing entries (and over all entries) across test takes, per method,
 and knn's ratio to the best baseline.
 """
@@ -12,28 +13,65 @@ from pathlib import Path
 import numpy as np
 
 
+#: our methods; every other method is a baseline
+OURS = ("knn", "auto")
+
+
+def bench_table(path):
+    """Markdown of a ``mocap-gapfill bench --json`` file: median ms (peak MB) per backend."""
+    payload = json.loads(Path(path).read_text())
+    rows = payload["results"]
+    backends = list(dict.fromkeys(r["backend"] for r in rows))
+    m = payload["machine"]
+    out = [f"Machine: {m.get('cpu')}, {m.get('cores')} cores, OMP_NUM_THREADS={m.get('threads')}, "
+           f"Python {m.get('python')}, numpy {m.get('numpy')}, torch {m.get('torch')} "
+           f"({m.get('torch_threads')} threads){', GPU ' + m['gpu'] if m.get('gpu') else ''}; "
+           "float32 GEMM " + ", ".join(f"{k} {v:.0f} GFLOP/s"
+                                        for k, v in m.get("gemm_gflops", {}).items()) + ".", ""]
+    for stage in dict.fromkeys(r["stage"] for r in rows):
+        out += [f"**{stage}** (median ms, tracemalloc peak MB)", "",
+                "| KB poses | frames | K | " + " | ".join(backends) + " | numpy / fastest |",
+                "|---:|---:|---:|" + "---:|" * (len(backends) + 1)]
+        cases = dict.fromkeys((r["kb_size"], r["queries"], r["k"]) for r in rows
+                              if r["stage"] == stage)
+        for case in cases:
+            got = {r["backend"]: r for r in rows if r["stage"] == stage
+                   and (r["kb_size"], r["queries"], r["k"]) == case}
+            cells = [f"{1000 * got[b]['median_s']:.0f} ({got[b]['peak_mb']:.0f})" if b in got
+                     else "" for b in backends]
+            fastest = min(r["median_s"] for r in got.values())
+            ratio = got["numpy"]["median_s"] / fastest if "numpy" in got else float("nan")
+            out.append(f"| {case[0]} | {case[1]} | {case[2]} | " + " | ".join(cells)
+                       + f" | {ratio:.2f} |")
+        out.append("")
+    return "\n".join(out)
+
+
 def table(path):
     payload = json.loads(Path(path).read_text())
     rows = payload["results"]
     methods = list(dict.fromkeys(r["method"] for r in rows))
     settings = list(dict.fromkeys(r["setting"] for r in rows))
     tests = sorted({r["test"] for r in rows})
+    ours = [m for m in OURS if m in methods]
     out = [f"### {Path(path).stem}: protocol `{payload['protocol']}`, {payload.get('fps')} fps, "
            f"seed {payload.get('seed')}",
            f"Test takes ({len(tests)}): {', '.join(tests)}. Knowledge base: "
            f"{', '.join(Path(s).as_posix().split('data/')[-1] for s in payload['kb_sources'])}, "
            "test subject left out.", "",
-           "| setting | " + " | ".join(methods) + " | knn / best baseline |",
-           "|---|" + "---:|" * (len(methods) + 1)]
+           "| setting | " + " | ".join(methods) + " | "
+           + " | ".join(f"{m} / best baseline" for m in ours) + " |",
+           "|---|" + "---:|" * (len(methods) + len(ours))]
     for s in settings:
         cells, means = [], {}
         for m in methods:
             sel = [r for r in rows if r["setting"] == s and r["method"] == m]
             means[m] = np.mean([r["rmse_missing_mm"] for r in sel])
             cells.append(f"{means[m]:.1f} ({np.mean([r['rmse_all_mm'] for r in sel]):.1f})")
-        best = min(v for m, v in means.items() if m != "knn")
+        best = min(v for m, v in means.items() if m not in OURS)
         bold = [f"**{c}**" if means[m] == min(means.values()) else c for m, c in zip(methods, cells)]
-        out.append(f"| {s} | " + " | ".join(bold) + f" | {means['knn'] / best:.2f} |")
+        out.append(f"| {s} | " + " | ".join(bold) + " | "
+                   + " | ".join(f"{means[m] / best:.2f}" for m in ours) + " |")
     seconds = {m: np.mean([r["seconds"] for r in rows if r["method"] == m]) for m in methods}
     out += ["", "Mean seconds per fill: " + ", ".join(f"{m} {v:.2f}" for m, v in seconds.items()),
             ""]
@@ -41,4 +79,5 @@ def table(path):
 
 
 if __name__ == "__main__":
-    print("\n".join(table(p) for p in sys.argv[1:]))
+    print("\n".join(bench_table(p) if "machine" in json.loads(Path(p).read_text()) else table(p)
+                    for p in sys.argv[1:]))
