@@ -21,7 +21,6 @@ def bench_table(path):
     """Markdown of a ``mocap-gapfill bench --json`` file: median ms (peak MB) per backend."""
     payload = json.loads(Path(path).read_text())
     rows = payload["results"]
-    backends = list(dict.fromkeys(r["backend"] for r in rows))
     m = payload["machine"]
     out = [f"Machine: {m.get('cpu')}, {m.get('cores')} cores, OMP_NUM_THREADS={m.get('threads')}, "
            f"Python {m.get('python')}, numpy {m.get('numpy')}, torch {m.get('torch')} "
@@ -29,6 +28,7 @@ def bench_table(path):
            "float32 GEMM " + ", ".join(f"{k} {v:.0f} GFLOP/s"
                                         for k, v in m.get("gemm_gflops", {}).items()) + ".", ""]
     for stage in dict.fromkeys(r["stage"] for r in rows):
+        backends = list(dict.fromkeys(r["backend"] for r in rows if r["stage"] == stage))
         out += [f"**{stage}** (median ms, tracemalloc peak MB)", "",
                 "| KB poses | frames | K | " + " | ".join(backends) + " | numpy / fastest |",
                 "|---:|---:|---:|" + "---:|" * (len(backends) + 1)]
