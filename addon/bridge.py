@@ -26,7 +26,8 @@ from . import compat
 
 MARKER_SET = "mocap_gapfill_marker_set"  # custom property on the parent empty of a marker set
 TAILS = "mocap_gapfill_tails"  # custom property of armatures whose joints are bone tails
-ROTATION_PATHS = {"QUATERNION": ("rotation_quaternion", 4), "AXIS_ANGLE": ("rotation_axis_angle", 4)}
+ROTATION_PATHS = {"QUATERNION": ("rotation_quaternion", 4),
+                  "AXIS_ANGLE": ("rotation_axis_angle", 4)}  # others: Euler
 
 
 # ---- keys --------------------------------------------------------------------------------------
@@ -118,7 +119,7 @@ def is_marker_set(obj):
 
 
 def take_owner(obj):
-    """The object that owns the gaps of ``obj``: an armature, or the marker-set empty of a marker."""
+    """The object owning the gaps of ``obj``: an armature, or the marker set of a marker."""
     if obj is None:
         return None
     if obj.type == "ARMATURE" or is_marker_set(obj):

@@ -83,7 +83,8 @@ def demo_scenes(outdir, demo, report=print):
             context.scene.mocap_gapfill.kb_path = str(kb)
             bpy.ops.mocap_gapfill.fill_gaps(objects=owner.name)
             scores[owner.name] = take_rmse(owner, truth, context.scene)
-            report(f"  Blender {owner.name}: RMSE over the gap samples {scores[owner.name]:6.1f} mm")
+            report(f"  Blender {owner.name}: RMSE over the gap samples "
+                   f"{scores[owner.name]:6.1f} mm")
         bpy.ops.wm.save_as_mainfile(filepath=str(outdir / "mocap_demo_filled.blend"))
         report(f"filled scene -> {outdir / 'mocap_demo_filled.blend'} "
                "(Mocap tab: switch Original / Recovered)")

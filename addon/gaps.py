@@ -143,7 +143,8 @@ def load_kb_cached(path):
 def kb_path(context):
     import bpy
 
-    path = bpy.path.abspath(context.scene.mocap_gapfill.kb_path) if context.scene.mocap_gapfill.kb_path else ""
+    chosen = context.scene.mocap_gapfill.kb_path
+    path = bpy.path.abspath(chosen) if chosen else ""
     if not path:
         p = prefs.get(context)
         path = bpy.path.abspath(p.default_kb) if p and p.default_kb else ""

@@ -133,7 +133,8 @@ class MOCAP_GAPFILL_PT_fill(_Panel, bpy.types.Panel):
             return
         row = layout.row(align=True)
         row.operator("mocap_gapfill.fill_gaps", text="Fill Selected Gap").scope = "SELECTED"
-        row.operator("mocap_gapfill.fill_gaps", text="Fill All Gaps", icon="MOD_SMOOTH").scope = "ALL"
+        row.operator("mocap_gapfill.fill_gaps", text="Fill All Gaps",
+                     icon="MOD_SMOOTH").scope = "ALL"
         owner = bridge.take_owner(context.active_object)
         if owner is not None and owner.mocap_gapfill.recovered_action is not None:
             box = layout.box()

@@ -84,7 +84,8 @@ class MOCAP_GAPFILL_PG_scene(bpy.types.PropertyGroup):
     k: IntProperty(name="K", default=0, min=0, soft_max=4096,
                    description="Neighbours per frame (0: automatic, min(1024, poses))")
     max_gap: IntProperty(name="Max gap", default=0, min=0,
-                         description="Leave gaps longer than this many frames unfilled (0: fill all)")
+                         description="Leave gaps longer than this many frames unfilled "
+                                     "(0: fill all)")
     detect_suspects: BoolProperty(name="Detect suspect data", default=True,
                                   description="Also flag keys that jump or stretch a limb")
     jump_factor: FloatProperty(name="Jump factor", default=8.0, min=2.0,

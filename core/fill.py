@@ -82,7 +82,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     probe = validation_gaps(missing, AUTO_PROBES)
 
     def run(name, target, p0, p1):
-        step = (lambda f, m: progress(p0 + (p1 - p0) * f, m))
+        def step(fraction, message):
+            progress(p0 + (p1 - p0) * fraction, message)
+
         return fill(target, name, kb=kb, settings=settings, progress=step,
                     should_cancel=should_cancel).positions
 

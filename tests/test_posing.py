@@ -1,7 +1,6 @@
 """Bone transforms from joint positions (core.posing) and suspect detection (core.suspect)."""
 
 import numpy as np
-import pytest
 
 from mocap_gapfill.core import synth
 from mocap_gapfill.core.io import read_motion

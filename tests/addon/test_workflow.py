@@ -3,7 +3,8 @@
 Marker set: CMU 85_02 (C3D, complete) imported as empties, keys deleted over ranges, gaps
 detected and filled from a KB of the other CMU C3D takes (subjects 01, 135). Armature: CMU 03_02
 (Daz-friendly BVH, complete) imported with Blender's own BVH importer, bone keys deleted over
-ranges, filled from a KB of every other Daz-friendly subject (every 4th pose). Both compared with the truth in millimetres.
+ranges, filled from a KB of every other Daz-friendly subject (every 4th pose). Both compared
+with the truth in millimetres.
 """
 
 import gzip
