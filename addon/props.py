@@ -16,9 +16,10 @@ UNITS = (
     ("IN", "Inches", ""), ("CMU", "CMU units", "1/0.45 inch, the CMU ASF unit"),
 )
 METHOD_ITEMS = (
-    ("auto", "Automatic", "Per point, the better of the knowledge base and spline interpolation "
-                          "on copies of its gaps in this take"),
     ("knn", "Knowledge base", "Nearest poses in the knowledge base, local PCA and optimisation"),
+    ("auto", "Knowledge base or spline", "Per point, spline interpolation where it refills "
+                                         "copies of the point's gaps clearly better than the "
+                                         "knowledge base (slow motion the KB does not cover)"),
     ("linear", "Linear", "Linear interpolation, for comparison"),
     ("spline", "Spline", "Cubic spline interpolation, for comparison"),
     ("intercorrelation", "Marker intercorrelation", "PCA of the take itself (no knowledge base)"),
@@ -80,7 +81,7 @@ class MOCAP_GAPFILL_PG_scene(bpy.types.PropertyGroup):
 
     kb_path: StringProperty(name="Knowledge base", subtype="FILE_PATH",
                             description="Knowledge-base file (.npz) of clean motion")
-    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="auto")
+    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="knn")
     k: IntProperty(name="K", default=0, min=0, soft_max=4096,
                    description="Neighbours per frame (0: automatic, min(1024, poses))")
     max_gap: IntProperty(name="Max gap", default=0, min=0,

@@ -242,9 +242,9 @@ def build_parser(extra=None):
     p.add_argument("-k", "--kb", help="knowledge base (.npz) for the knn and pca methods")
     p.add_argument("-o", "--output", required=True,
                    help=f"{', '.join(WRITE_FORMATS)} (chosen by extension)")
-    p.add_argument("--method", default="auto", choices=METHODS,
-                   help="auto (default): per point the better of knn and spline on copies of "
-                        "the gaps; knn: the knowledge-base method alone")
+    p.add_argument("--method", default="knn", choices=METHODS,
+                   help="knn (default): the knowledge-base method; auto: per point knn or "
+                        "spline, whichever refills copies of its gaps clearly better")
     p.add_argument("-K", dest="k", type=int,
                    help="neighbours per frame (knn; default 1024, or the KB size if smaller)")
     p.add_argument("--max-gap", type=int, metavar="FRAMES",

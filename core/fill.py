@@ -12,6 +12,9 @@ NEEDS_KB = ("knn", "auto", "pca")
 AUTO_CANDIDATES = ("knn", "spline")
 #: validation gaps per point for ``auto``
 AUTO_PROBES = 3
+#: ``auto`` leaves a point to knn unless another candidate's error on its copies is below this
+#: share of knn's (a copy is a small sample; the KB method is the better bet when close)
+AUTO_MARGIN = 0.5
 
 
 def fill(motion, method="knn", kb=None, settings=None, progress=None, should_cancel=None,
@@ -99,6 +102,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             # a candidate that leaves a copy unfilled (a point the KB lacks) cannot win there
             errors.append(np.where(probe, np.nan_to_num(sq, nan=np.inf), 0.0).sum(axis=0))
         errors = np.array(errors)
+        errors[1:] /= AUTO_MARGIN  # knn (index 0) keeps a point unless clearly beaten
         seen = probe.any(axis=0)
         choice[seen] = np.argmin(errors[:, seen], axis=0)
     results = [run(name, motion, 0.5 + 0.5 * i / len(AUTO_CANDIDATES),

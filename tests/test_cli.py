@@ -79,7 +79,7 @@ def test_kb_build_then_fill(data_dir, tmp_path):
     assert r.returncode == 2 and "exists" in r.stderr  # never replaced silently
     src = data_dir / "cmu/c3d/01_01.c3d"
     out = tmp_path / "filled.c3d"
-    r = cli("fill", src, "-k", kb, "-o", out, "--quiet", "--method", "knn")
+    r = cli("fill", src, "-k", kb, "-o", out, "--quiet")
     assert r.returncode == 0, r.stderr
     assert "filled 30 samples with knn" in r.stdout
     assert "RBAC-1" in r.stderr  # the extra marker the KB does not know is reported
