@@ -100,14 +100,14 @@ class Take:
 
     def motion(self, missing):
         """A core :class:`Motion` (metres) with ``missing`` (frames, points) samples removed."""
-        pos = self.positions * self.metres
-        pos[missing] = np.nan
+        known = self.positions * self.metres
         if self.kind == "armature":
             limbs = skeleton_limbs(self.parents)
         else:
-            limbs = rigid_marker_pairs(self.positions * self.metres)
-        return Motion(pos, self.points, self.fps, parents=self.parents, limbs=limbs,
-                      source=self.name, source_format="blender")
+            limbs = rigid_marker_pairs(known)
+        return Motion(np.where(missing[..., None], np.nan, known), self.points, self.fps,
+                      parents=self.parents, limbs=limbs, source=self.name,
+                      source_format="blender")
 
 
 def scene_fps(scene):
@@ -148,10 +148,13 @@ def read_markers(root, scene):
         if curves is None or any(c is None for c in per_axis):
             keys.append((np.zeros(0, dtype=int), np.zeros((0, 3))))
             continue
-        frames = np.round(curve_keys(per_axis[0])[0]).astype(int)
-        values = np.stack([[c.evaluate(f) for f in frames] if i else curve_keys(c)[1]
-                           for i, c in enumerate(per_axis)], axis=1)
-        keys.append((frames, values))
+        axes = [curve_keys(c) for c in per_axis]
+        frames = axes[0][0]
+        # the frames of x; y and z are read from their keys where keyed alike (our import),
+        # else evaluated there
+        values = np.stack([v if np.array_equal(f, frames) else [c.evaluate(t) for t in frames]
+                           for (f, v), c in zip(axes, per_axis)], axis=1)
+        keys.append((np.round(frames).astype(int), values))
     all_frames = np.concatenate([k[0] for k in keys]) if keys else np.zeros(0, dtype=int)
     if not len(all_frames):
         raise ValueError(f"'{root.name}' has no marker keys")
@@ -186,9 +189,10 @@ def _frame_range(obj):
 
 
 def read_armature(obj, scene):
-    """An armature's bone heads over its keyed range as a :class:`Take`, with what writing back
-    needs: rest matrices, the evaluated basis matrices (the twist reference inside gaps), which
-    bones have animated locations, and each bone's rotation mode."""
+    """An armature's joints (bone heads, or tails for our ASF/AMC armatures) over its keyed
+    range as a :class:`Take`, with what writing back needs: rest matrices, the evaluated basis
+    matrices (the twist reference inside gaps), which bones have animated locations, each
+    bone's rotation mode and what each bone places (tail handles for our armatures)."""
     first, last = _frame_range(obj)
     bones = obj.pose.bones
     names = tuple(b.name for b in bones)
@@ -311,7 +315,7 @@ def show(obj, which):
 
 
 # ---- writing back ------------------------------------------------------------------------------
-def write_markers(take, filled, mask, scene):
+def write_markers(take, filled, mask):
     """Location keys on the filled samples of a marker set (world metres -> parent space)."""
     root = bpy.data.objects[take.name]
     children = {c.name: c for c in markers_of(root)}

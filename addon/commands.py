@@ -138,9 +138,7 @@ def take_rmse(owner, truth, scene):
     from . import bridge, gaps
 
     take = bridge.read_take(owner, scene)
-    frames = take.positions.shape[0]
-    mask = bridge.missing_points(take, gaps.gap_mask(owner.mocap_gapfill.gaps, take.points,
-                                                     take.first, frames))
-    ref = truth.select(list(take.points)).positions[:frames]
+    mask = gaps.take_missing(owner, take)
+    ref = truth.select(list(take.points)).positions[:len(mask)]
     err = (take.positions * take.metres - ref)[mask]
     return float(1000 * np.sqrt(np.mean(np.sum(err ** 2, axis=1))))

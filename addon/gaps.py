@@ -100,18 +100,17 @@ def update_stats(owner, points, first, frames):
     """Per-point totals (gaps, frames, percentage, longest) of a take's gap list."""
     settings = owner.mocap_gapfill
     mask = gap_mask(settings.gaps, points, first, frames)
+    runs = gap_runs(mask)  # point-major
     settings.points.clear()
     settings.frames = frames
-    for j, name in enumerate(points):
-        runs = gap_runs(mask[:, j:j + 1])
-        if not runs:
-            continue
+    for j in dict.fromkeys(p for p, _, _ in runs):
+        lengths = [b - a + 1 for p, a, b in runs if p == j]
         item = settings.points.add()
-        item.name = name
-        item.gaps = len(runs)
+        item.name = points[j]
+        item.gaps = len(lengths)
         item.frames = int(mask[:, j].sum())
         item.percent = 100.0 * item.frames / max(frames, 1)
-        item.longest = max(b - a + 1 for _, a, b in runs)
+        item.longest = max(lengths)
 
 
 def gap_mask(gaps, points, first, frames):
@@ -126,6 +125,13 @@ def gap_mask(gaps, points, first, frames):
         if a <= b:
             mask[a:b + 1, j] = True
     return mask
+
+
+def take_missing(owner, take):
+    """Point samples a take does not know: those under its listed gaps and its unkeyed ones."""
+    every = gap_mask(owner.mocap_gapfill.gaps, take.points, take.first,
+                     take.positions.shape[0]) | bridge.unkeyed(take)
+    return bridge.missing_points(take, every)
 
 
 def load_kb_cached(path):
@@ -186,8 +192,7 @@ def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, 
             continue
         chosen = [settings.gaps[i] for i in ids]
         write = gap_mask(chosen, take.points, take.first, frames)
-        every = gap_mask(settings.gaps, take.points, take.first, frames) | bridge.unkeyed(take)
-        missing = bridge.missing_points(take, every)
+        missing = take_missing(owner, take)
         if take.kind == "markers":
             write &= missing
         plans.append(FillPlan(owner.name, take, write, missing, ids))
@@ -224,7 +229,7 @@ def apply_fill(context, plans, results):
         owner = bpy.data.objects[plan.owner]
         if plan.take.kind == "markers":
             ok = plan.write & np.isfinite(filled[..., 0])
-            written += bridge.write_markers(plan.take, filled, ok, context.scene)
+            written += bridge.write_markers(plan.take, filled, ok)
         else:
             written += bridge.write_armature(plan.take, basis, plan.write)
         settings = owner.mocap_gapfill

@@ -286,9 +286,7 @@ class MOCAP_GAPFILL_OT_ghost(bpy.types.Operator):
             dup = src.copy()
             dup.name = name if src is owner else f"{src.name} (original)"
             dup.mocap_gapfill.gaps.clear()
-            for prop in (bridge.MARKER_SET,):
-                if prop in dup:
-                    del dup[prop]
+            dup.pop(bridge.MARKER_SET, None)  # the ghost is no take of its own
             context.scene.collection.objects.link(dup)
             dup.display_type = "WIRE"
             dup.show_in_front = True
@@ -364,9 +362,7 @@ class MOCAP_GAPFILL_OT_build_kb(JobOperator, bpy.types.Operator):
         motions = []
         for owner in gaps.takes_in(context):
             take = gaps.read_original(owner, context.scene)
-            every = gaps.gap_mask(owner.mocap_gapfill.gaps, take.points, take.first,
-                                  take.positions.shape[0]) | bridge.unkeyed(take)
-            motions.append(take.motion(bridge.missing_points(take, every)))
+            motions.append(take.motion(gaps.take_missing(owner, take)))
         if not motions:
             raise GapFillError("select the takes to learn from")
 

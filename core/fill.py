@@ -5,6 +5,7 @@ import numpy as np
 from . import baselines
 from .errors import GapFillError
 from .kb import match_names
+from .motion import gap_runs
 
 METHODS = ("knn", "auto", "linear", "spline", "svt", "pca", "intercorrelation")
 NEEDS_KB = ("knn", "auto", "pca")
@@ -62,8 +63,15 @@ def fill(motion, method="knn", kb=None, settings=None, progress=None, should_can
         done = func[method](motion.positions)
         index = list(range(motion.n_points))
     out = motion.positions.copy()
-    out[:, index] = np.where(np.isnan(out[:, index]), done, out[:, index])
-    filled = motion.missing & ~np.isnan(out[..., 0])
+    out[:, index] = done
+    return _with_fill(motion, out)
+
+
+def _with_fill(motion, out):
+    """``motion`` with its missing samples taken from ``out`` and flagged as filled."""
+    missing = motion.missing
+    out = np.where(missing[..., None], out, motion.positions)
+    filled = missing & ~np.isnan(out[..., 0])
     if motion.filled is not None:
         filled |= motion.filled
     return motion.replace(positions=out, filled=filled)
@@ -73,9 +81,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     """Per point, the better of the knowledge-base fill and spline interpolation on this take.
 
     Each gap is copied (same points, same length) to nearby frames where its point is observed;
-    both candidates fill those copies, and each point's gaps are filled by the candidate with the
-    smaller error on its copies (the knowledge base where a point has no copy; interpolation for
-    points the knowledge base lacks). The KB method
+    both candidates fill those copies, and a point's gaps go to interpolation only where its
+    error on the copies is below :data:`AUTO_MARGIN` of the knowledge base's (the knowledge base
+    where a point has no copy; interpolation for points the knowledge base lacks). The KB method
     wins where the motion is fast or the gap long, interpolation where the motion is slow and the
     KB holds no similar poses.
     """
@@ -105,24 +113,21 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         errors[1:] /= AUTO_MARGIN  # knn (index 0) keeps a point unless clearly beaten
         seen = probe.any(axis=0)
         choice[seen] = np.argmin(errors[:, seen], axis=0)
-    results = [run(name, motion, 0.5 + 0.5 * i / len(AUTO_CANDIDATES),
-                   0.5 + 0.5 * (i + 1) / len(AUTO_CANDIDATES)) if (choice == i).any() or i == 0
-               else None for i, name in enumerate(AUTO_CANDIDATES)]
-    out = results[0].copy()
-    for i in range(1, len(AUTO_CANDIDATES)):
-        if results[i] is not None:
-            out[:, choice == i] = results[i][:, choice == i]
+    out = None
+    for i, name in enumerate(AUTO_CANDIDATES):  # the first (knn) fills every point
+        chosen = choice == i
+        if out is not None and not chosen.any():
+            continue
+        result = run(name, motion, 0.5 + 0.5 * i / len(AUTO_CANDIDATES),
+                     0.5 + 0.5 * (i + 1) / len(AUTO_CANDIDATES))
+        out = result if out is None else np.where(chosen[None, :, None], result, out)
     gappy = missing.any(axis=0)
     for i, name in enumerate(AUTO_CANDIDATES):
         points = [motion.names[p] for p in np.flatnonzero(gappy & (choice == i))]
         if points:
             report(f"auto: {name} for {len(points)} points ({', '.join(points[:8])}"
                    f"{'...' if len(points) > 8 else ''})")
-    out = np.where(missing[..., None], out, motion.positions)
-    filled = missing & ~np.isnan(out[..., 0])
-    if motion.filled is not None:
-        filled |= motion.filled
-    return motion.replace(positions=out, filled=filled)
+    return _with_fill(motion, out)
 
 
 def validation_gaps(missing, per_point=3, margin=10):
@@ -132,8 +137,6 @@ def validation_gaps(missing, per_point=3, margin=10):
     points at the same frames lands at the same shift for all of them when it can."""
     frames, points = missing.shape
     probe = np.zeros_like(missing)
-    from .motion import gap_runs
-
     runs = sorted(gap_runs(missing), key=lambda r: (r[1], r[2], r[0]))
     count = np.zeros(points, dtype=int)
     for p, a, b in runs:

@@ -143,8 +143,8 @@ class _Problem:
         self.present3 = ~self.miss3
         self.obs = np.nan_to_num(obs_norm)  # (m, n, 3) normalised observations, 0 where missing
         self.mean, self.comps, self.noise = mean, comps, noise
-        self.used = lam > 0
-        self.inv_lam = np.where(self.used, 1.0 / np.where(self.used, lam, 1.0), 0.0)
+        self.lam = lam
+        self.used, self.inv_lam = _prior(lam)
         self.rot = rotation_z(angle[frames])  # normalised -> world, (m, 3, 3)
         self.rot_t = self.rot.transpose(0, 2, 1)
         self.root = root[frames][:, None, :]
@@ -173,7 +173,7 @@ class _Problem:
         self.span = span
 
     def poses(self, h):
-        return self.mean + (self.comps @ h[..., None])[..., 0]
+        return _poses(self.mean, self.comps, h)
 
     def energy(self, flat):
         s = self.s
@@ -214,12 +214,41 @@ class _Problem:
 
     def closed_form(self):
         """Per-frame minimiser of the prior and input terms alone: (m, r)."""
-        return _closed_form(self.miss, self.obs, self.mean, self.comps, self.used, self.inv_lam,
-                            self.noise, self.s)
+        return _closed_form(self.miss, self.obs, self.mean, self.comps, self.lam, self.noise,
+                            self.s)
 
 
-def _closed_form(miss, obs, mean, comps, used, inv_lam, noise, settings):
+def _prior(lam):
+    """Which components a local model uses (eigenvalue > 0) and their inverse eigenvalues."""
+    used = lam > 0
+    return used, np.where(used, 1.0 / np.where(used, lam, 1.0), 0.0)
+
+
+def _poses(mean, comps, h):
+    """Flat poses ``mean + comps @ h`` of each frame's local model."""
+    return mean + (comps @ h[..., None])[..., 0]
+
+
+def _fit_models(index, queries, mask, settings, rng):
+    """Search each query's K neighbours over its present points (``~mask``) and fit its local
+    model; also its spread: how far the query lies from its neighbours, per coordinate, times
+    the missing share. With a noise level far below that, the components chase the difference
+    and may extrapolate wildly into the missing points (see docs/METHOD_NOTES.md).
+
+    Returns the :func:`_local_pca` arrays (means, comps, lams, noise) and the spread (q,).
+    """
+    idx, dist2 = index.search(queries, ~mask, settings.k, ordered=False)
+    neighbours = index.poses.reshape(index.n, -1)[idx]  # float32: covariance summed in float32
+    means, comps, lams, noise = _local_pca(neighbours, settings, rng, index.backend)
+    n = mask.shape[1]
+    present = (~mask).sum(axis=1)
+    spread = ((n - present) / n) * np.median(dist2, axis=1) / (3 * np.maximum(present, 1))
+    return means, comps, lams, noise, spread
+
+
+def _closed_form(miss, obs, mean, comps, lam, noise, settings):
     """Coefficients (m, r) minimising the retrieval prior + input terms, frame by frame."""
+    used, inv_lam = _prior(lam)
     present = np.repeat(~miss, 3, axis=1).astype(float)
     wo = comps * present[..., None]
     lhs = wo.transpose(0, 2, 1) @ wo * (settings.w_in / noise)[:, None, None]
@@ -251,20 +280,13 @@ def _noise_factor(obs_norm, model, frames, index, settings, rng):
         return 1.0
     rows, hidden = np.array(rows), np.array(hidden)
     mask = model[rows] | hidden
-    idx, dist2 = index.search(obs_norm[rows], ~mask, settings.k, ordered=False)
-    means, comps, lams, noise = _local_pca(index.poses.reshape(index.n, -1)[idx], settings, rng,
-                                            index.backend)
-    n = mask.shape[1]
-    present = (~mask).sum(axis=1)
-    spread = ((n - present) / n) * np.median(dist2, axis=1) / (3 * np.maximum(present, 1))
+    means, comps, lams, noise, spread = _fit_models(index, obs_norm[rows], mask, settings, rng)
     obs = np.nan_to_num(obs_norm[rows])
-    used = lams > 0
-    inv_lam = np.where(used, 1.0 / np.where(used, lams, 1.0), 0.0)
     errors = []
     for factor in NOISE_FACTORS:
         level = np.maximum(noise, factor * spread)
-        h = _closed_form(mask, obs, means, comps, used, inv_lam, level, settings)
-        pose = (means + (comps @ h[..., None])[..., 0]).reshape(len(rows), n, 3)
+        h = _closed_form(mask, obs, means, comps, lams, level, settings)
+        pose = _poses(means, comps, h).reshape(obs.shape)
         errors.append(float(((pose - obs) ** 2)[hidden].sum()))
     return NOISE_FACTORS[int(np.argmin(errors))]
 
@@ -368,21 +390,13 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
         spread = np.zeros(m)
         cache["models"] = (means, comps, lams, noise, spread)
         todo = np.arange(m)
-    flat_kb = index.poses.reshape(index.n, -1)
     for start in range(0, len(todo), settings.batch_frames):
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
         rows = todo[start:start + settings.batch_frames]
         sel = frames[rows]
-        idx, dist2 = index.search(obs_norm[sel], ~model[sel], settings.k, ordered=False)
-        neighbours = flat_kb[idx]  # float32: the covariance is summed in float32, then float64
-        means[rows], comps[rows], lams[rows], noise[rows] = _local_pca(neighbours, settings, rng,
-                                                                       index.backend)
-        # how far the query lies from its neighbours, per coordinate, times the missing share:
-        # with a noise level far below it the components chase that difference and may
-        # extrapolate wildly into the missing points (see docs/METHOD_NOTES.md)
-        present = (~model[sel]).sum(axis=1)
-        spread[rows] = ((n - present) / n) * np.median(dist2, axis=1) / (3 * np.maximum(present, 1))
+        means[rows], comps[rows], lams[rows], noise[rows], spread[rows] = _fit_models(
+            index, obs_norm[sel], model[sel], settings, rng)
         progress(p0 + (p1 - p0) * 0.7 * (start + len(sel)) / max(1, len(todo)),
                  "searching and fitting local models")
     if "factor" not in cache:
