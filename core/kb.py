@@ -7,13 +7,13 @@ frame, ``names``, ``fps``, ``limbs``, ``sources`` (one string per source file), 
 
 import fnmatch
 import json
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .errors import GapFillError, ParseError
+from .formats.tabular import load_arrays, scalar, strings
 from .io import READ_FORMATS, atomic_output, read_motion
 from .normalize import find_reference, frames_of, normalize
 
@@ -88,46 +88,40 @@ def load_kb(path):
         raise ParseError("no such knowledge-base file", path)
     if path.stat().st_size == 0:
         raise ParseError("empty knowledge-base file (0 bytes)", path)
-    try:
-        with zipfile.ZipFile(path) as archive:
-            if sum(i.file_size for i in archive.infolist()) > MAX_KB_BYTES:
-                raise ParseError("knowledge base too large to load", path)
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except ParseError:
-        raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
-        raise ParseError(f"not a knowledge-base file ({exc})", path) from None
+    arrays = load_arrays(path, MAX_KB_BYTES, "a knowledge-base file")
     needed = {"format_version", "poses", "names", "fps", "limbs", "sources", "source_index"}
     lacking = needed - set(arrays)
     if lacking:
         raise ParseError(f"not a knowledge-base file: lacks {', '.join(sorted(lacking))}", path)
-    version = int(arrays["format_version"])
+    version = scalar(arrays, "format_version", "iu", path)
     if version > KB_VERSION:
         raise ParseError(f"knowledge base format {version} is newer than this version of "
                          f"mocap-gapfill understands ({KB_VERSION}): update mocap-gapfill", path)
+    if version < 1:
+        raise ParseError(f"bad format_version {version}", path)
     poses, names = arrays["poses"], arrays["names"]
-    if poses.dtype != np.float32 or poses.ndim != 3 or poses.shape[2] != 3 or not len(poses):
+    if poses.dtype != np.float32 or poses.ndim != 3 or poses.shape[2] != 3 or not poses.size:
         raise ParseError(f"poses must be float32 (poses, points, 3), got {poses.dtype} "
                          f"{poses.shape}", path)
-    if names.dtype.kind != "U" or names.shape != (poses.shape[1],) or len(set(names)) != len(names):
-        raise ParseError("names must be one unique string per point", path)
+    names = strings(arrays, "names", (poses.shape[1],), path, unique=True)
     if not np.isfinite(poses).all():
         raise ParseError("poses contain NaN or infinite values", path)
-    fps = float(arrays["fps"])
+    fps = float(scalar(arrays, "fps", "fiu", path))
     limbs = arrays["limbs"]
     index = arrays["source_index"]
     sources = arrays["sources"]
     if not (np.isfinite(fps) and fps > 0):
         raise ParseError(f"bad fps {fps}", path)
-    if limbs.dtype.kind != "i" or limbs.ndim != 2 or (limbs.size and (
-            limbs.shape[1] != 2 or limbs.min() < 0 or limbs.max() >= len(names))):
+    if limbs.dtype.kind != "i" or limbs.ndim != 2 or limbs.shape[1] != 2 or (limbs.size and (
+            limbs.min() < 0 or limbs.max() >= len(names))):
         raise ParseError("bad limbs array", path)
+    sources = strings(arrays, "sources", sources.shape[:1], path) if sources.ndim == 1 else []
+    if not sources:
+        raise ParseError("sources must be a list of strings", path)
     if index.shape != (len(poses),) or index.dtype.kind != "i" or (
-            index.min() < 0 or index.max() >= max(1, len(sources))):
+            index.min() < 0 or index.max() >= len(sources)):
         raise ParseError("bad source_index array", path)
-    return KnowledgeBase(poses, tuple(names.tolist()), fps, limbs,
-                         tuple(sources.tolist()), index)
+    return KnowledgeBase(poses, tuple(names), fps, limbs, tuple(sources), index)
 
 
 def motion_files(sources, exclude=()):

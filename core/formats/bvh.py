@@ -191,9 +191,12 @@ def _header_value(line, key, path, number):
     if not line.strip().lower().startswith(key):
         raise ParseError(f"expected '{key}'", path, number)
     try:
-        return float(line.split(":", 1)[1])
+        value = float(line.split(":", 1)[1])
     except ValueError:
         raise ParseError(f"bad value after '{key}'", path, number) from None
+    if not np.isfinite(value):
+        raise ParseError(f"bad value after '{key}': {value}", path, number)
+    return value
 
 
 def forward_kinematics(bvh):

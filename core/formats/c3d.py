@@ -191,21 +191,31 @@ def _labels(raw, count):
     return names
 
 
+def _run_reader(path, out):
+    """Run :data:`_READER` on ``path`` in a new Python process: (exit code, stderr).
+
+    Raises ``subprocess.TimeoutExpired`` after :data:`READ_TIMEOUT` seconds. (The fuzzing harness,
+    tools/fuzz.py, swaps in a forked child running the same code, to read faster.)
+    """
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    proc = subprocess.run([sys.executable, "-c", _READER, str(path), str(out)], env=env,
+                          capture_output=True, text=True, timeout=READ_TIMEOUT)
+    return proc.returncode, proc.stderr
+
+
 def _read_isolated(path):
     """ezc3d's read in a child process: the arrays, or a ParseError (also on a crash/hang)."""
     with tempfile.TemporaryDirectory(prefix="mocap_gapfill_c3d_") as tmp:
         out = Path(tmp) / "read.npz"
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
         try:
-            proc = subprocess.run([sys.executable, "-c", _READER, str(path), str(out)], env=env,
-                                  capture_output=True, text=True, timeout=READ_TIMEOUT)
+            code, stderr = _run_reader(path, out)
         except subprocess.TimeoutExpired:
             raise ParseError(f"reading took over {READ_TIMEOUT} s (corrupt file?)", path) from None
-        if proc.returncode == 3:
-            reason = proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else "unknown"
+        if code == 3:
+            reason = stderr.strip().splitlines()[-1] if stderr.strip() else "unknown"
             raise ParseError(f"unreadable C3D ({reason})", path)
-        if proc.returncode != 0 or not out.is_file():
-            raise ParseError(f"the C3D library crashed on this file (exit {proc.returncode}): "
+        if code != 0 or not out.is_file():
+            raise ParseError(f"the C3D library crashed on this file (exit {code}): "
                              "it is corrupt", path)
         with np.load(out, allow_pickle=False) as npz:
             return {k: npz[k] for k in npz.files}

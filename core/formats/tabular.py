@@ -35,40 +35,84 @@ def write_npz(motion, fileobj):
     )
 
 
-def read_npz(path):
+def load_arrays(path, max_bytes, what="a readable .npz"):
+    """The arrays of an ``.npz`` file, never unpickled; :class:`ParseError` ("not ``what``") if it
+    is not one, or if its members would take more than ``max_bytes`` (checked before anything is
+    loaded)."""
     try:
+        with zipfile.ZipFile(path) as archive:
+            if sum(i.file_size for i in archive.infolist()) > max_bytes:
+                raise ParseError(f"too large to load (over {max_bytes >> 20} MB of arrays)", path)
         with np.load(path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
-        raise ParseError(f"not a readable .npz ({exc})", path) from None
-    for key in ("positions", "names", "fps"):
-        if key not in arrays:
+    except ParseError:
+        raise
+    except Exception as exc:  # zipfile and numpy raise many kinds on a corrupt file
+        raise ParseError(f"not {what} ({type(exc).__name__}: {exc})", path) from None
+    # members not named .npy come back as raw bytes: not ours
+    return {k: v for k, v in arrays.items() if isinstance(v, np.ndarray)}
+
+
+def scalar(arrays, key, kinds, path, default=None):
+    """A one-number array of one of the dtype ``kinds`` (e.g. ``"iu"``) as a Python number."""
+    if key not in arrays:
+        if default is None:
             raise ParseError(f"missing array {key!r}", path)
-    version = int(arrays.get("format_version", NPZ_VERSION))
+        return default
+    value = arrays[key]
+    if value.size != 1 or value.dtype.kind not in kinds:
+        raise ParseError(f"{key} must be one number, got {value.dtype} {value.shape}", path)
+    return value.reshape(()).item()
+
+
+def strings(arrays, key, shape, path, unique=False):
+    """A unicode array of this shape as a list of non-empty strings (valid code points only)."""
+    value = arrays.get(key)
+    if value is None or value.dtype.kind != "U" or value.shape != shape:
+        raise ParseError(f"{key} must be {shape[0] if shape else 1} strings", path)
+    codes = np.frombuffer(value.tobytes(), dtype=np.uint32)
+    if codes.size and (codes.max() > 0x10FFFF or ((codes >= 0xD800) & (codes < 0xE000)).any()):
+        raise ParseError(f"{key} holds invalid characters", path)
+    out = value.tolist()
+    out = [out] if isinstance(out, str) else out
+    if not all(out) or (unique and len(set(out)) != len(out)):
+        raise ParseError(f"{key} must be non-empty{' and unique' if unique else ''}", path)
+    return out
+
+
+#: what a motion .npz may hold in arrays
+MAX_NPZ_BYTES = 4 << 30
+
+
+def read_npz(path):
+    arrays = load_arrays(path, MAX_NPZ_BYTES)
+    version = scalar(arrays, "format_version", "iu", path, NPZ_VERSION)
     if version > NPZ_VERSION:
         raise ParseError(f"written by a newer version (format {version}); update mocap-gapfill",
                          path)
-    positions = arrays["positions"]
-    if positions.dtype.kind not in "fiu" or positions.ndim != 3 or positions.shape[-1] != 3:
-        raise ParseError(f"positions must be numbers of shape (frames, points, 3), got "
-                         f"{positions.dtype} {positions.shape}", path)
-    names = arrays["names"]
-    if names.dtype.kind != "U" or names.shape != (positions.shape[1],):
-        raise ParseError("names must be one string per point", path)
+    positions = arrays.get("positions")
+    if positions is None or positions.dtype.kind not in "fiu" or positions.ndim != 3 or (
+            positions.shape[-1] != 3):
+        raise ParseError("positions must be numbers of shape (frames, points, 3)", path)
+    names = strings(arrays, "names", (positions.shape[1],), path)
     parents = arrays.get("parents", np.zeros(0, dtype=np.int64))
+    if parents.dtype.kind not in "iu" or parents.ndim != 1:
+        raise ParseError("parents must be integers", path)
     parents = tuple(parents.tolist()) if parents.size else None
     filled = arrays.get("filled")
+    units = strings(arrays, "units", (), path)[0] if "units" in arrays else "m"
+    up_axis = strings(arrays, "up_axis", (), path)[0] if "up_axis" in arrays else "z"
     try:
         return Motion(
             positions=positions.astype(np.float64),
-            names=tuple(names.tolist()),
-            fps=float(arrays["fps"]),
+            names=tuple(names),
+            fps=scalar(arrays, "fps", "fiu", path),
             parents=parents,
             limbs=arrays.get("limbs", skeleton_limbs(parents) if parents else np.zeros((0, 2))),
             source=str(path),
             source_format="npz",
-            units=str(arrays.get("units", "m")),
-            up_axis=str(arrays.get("up_axis", "z")),
+            units=units,
+            up_axis=up_axis,
             filled=filled if filled is not None and filled.size else None,
         )
     except (ValueError, TypeError) as exc:

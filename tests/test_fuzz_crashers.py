@@ -1,0 +1,52 @@
+"""Every input the fuzzer (tools/fuzz.py) found to crash a reader, read again: each must now end
+in a successful read or a GapFillError. Inputs are rebuilt from their seed (made from the real
+data) and kept edits (tests/fuzz_crashers/); each is read in a child process with a time limit,
+so a crash or a hang fails the test instead of the test run."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import fuzz_inputs
+
+WORKER = r"""
+import json, sys
+sys.path.insert(0, sys.argv[1])
+import fuzz_inputs
+from mocap_gapfill.core.errors import GapFillError
+fmt, path, partner = json.loads(sys.stdin.read())
+try:
+    fuzz_inputs.read_as_user(fmt, path, partner)
+    print("read")
+except GapFillError as exc:
+    print("GapFillError: " + str(exc))
+"""
+
+CASES = fuzz_inputs.crashers()
+
+
+def test_crashers_are_kept():
+    assert CASES, "tests/fuzz_crashers/ is empty"
+    assert {record["format"] for _, record in CASES} <= set(fuzz_inputs.FORMATS)
+
+
+@pytest.mark.parametrize("case", CASES, ids=[p.stem for p, _ in CASES])
+def test_a_former_crasher_now_reads_or_fails_cleanly(data_dir, tmp_path, case):
+    _, record = case
+    fmt = record["format"]
+    seed = fuzz_inputs.seeds(fmt, data_dir)[record["seed"]]
+    path = tmp_path / ("input.npz" if fmt == "kb" else f"input.{fmt}")
+    path.write_bytes(fuzz_inputs.decode(seed, record["edits"]))
+    partner = None
+    if fuzz_inputs.partner(fmt, data_dir):
+        suffix, raw = fuzz_inputs.partner(fmt, data_dir)
+        partner = tmp_path / f"partner{suffix}"
+        partner.write_bytes(raw)
+    proc = subprocess.run([sys.executable, "-c", WORKER, str(Path(fuzz_inputs.__file__).parent)],
+                          input=json.dumps([fmt, str(path), partner and str(partner)]),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.startswith(("read", "GapFillError")), proc.stdout
