@@ -85,7 +85,7 @@ def find_reference(names):
         f"among {', '.join(names[:12])}{'...' if len(names) > 12 else ''}")
 
 
-def frames_of(positions, reference):
+def frames_of(positions, reference, template=None):
     """Per-frame root (frames, 3) and facing angle (frames,) of a motion, robust to gaps.
 
     Where the reference points are missing, the root is carried rigidly from the nearest frames
@@ -93,11 +93,17 @@ def frames_of(positions, reference):
     follows the present mirror pair (e.g. the buttocks or the shoulders) whose line keeps the
     steadiest angle to the hip line, with that angle's offset interpolated across the run. With
     no usable points both are interpolated in time (held at clip ends).
+
+    When no frame shows all the reference points, ``template`` (their typical normalised
+    positions, e.g. a knowledge base's median pose) is fitted rigidly to those present in each
+    frame that shows at least two of them.
     """
     pos = np.asarray(positions, dtype=np.float64)
     root = pos[:, list(reference.root)].mean(axis=1)
     angle = _line_angle(pos, reference.left, reference.right)
     known = np.isfinite(root).all(axis=1) & np.isfinite(angle)
+    if not known.any() and template is not None:
+        root, angle, known = _fit_template(pos, reference, template)
     if not known.any():
         raise GapFillError("the root and hip points are missing in every frame: cannot normalise")
     unwrapped = np.zeros(len(angle))
@@ -140,6 +146,32 @@ def frames_of(positions, reference):
             root[a:b] = mid[a:b] + np.einsum("fij,fj->fi", rotation_z(angle[a:b]), body)
             break
     return root, angle
+
+
+def reference_points(reference):
+    """The indices of the root, left and right points, each once, sorted."""
+    return sorted({*reference.root, *reference.left, *reference.right})
+
+
+def _fit_template(pos, reference, template):
+    """Root and angle of each frame from a rigid fit (turn about Z, shift) of the template
+    (normalised positions of :func:`reference_points`) to those of them present; frames with
+    fewer than two present stay unknown (NaN)."""
+    pts = reference_points(reference)
+    p = pos[:, pts]
+    seen = np.isfinite(p[..., 0])
+    known = seen.sum(axis=1) >= 2
+    w = seen[..., None].astype(float)
+    count = np.maximum(w.sum(axis=1), 1)
+    cp = np.nansum(p * w, axis=1) / count  # centroids of the present points, frame and template
+    co = (template[None] * w).sum(axis=1) / count
+    u = (template[None] - co[:, None])[..., :2]
+    v = np.nan_to_num(p - cp[:, None])[..., :2]
+    angle = np.arctan2((w[..., 0] * (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0])).sum(axis=1),
+                       (w * u * v).sum(axis=(1, 2)))
+    root = cp - np.einsum("fij,fj->fi", rotation_z(angle), co)
+    root[~known], angle[~known] = np.nan, np.nan
+    return root, angle, known
 
 
 def _line_angle(pos, left, right):

@@ -35,7 +35,7 @@ from .baselines import fill_linear
 from .errors import GapFillError
 from .kb import match_names
 from .motion import gap_runs
-from .normalize import denormalize, frames_of, normalize, rotation_z
+from .normalize import denormalize, frames_of, normalize, reference_points, rotation_z
 from .search import KBIndex
 
 #: smoothness kernels: residual_t = sum_j c_j X_{t+j} for j = 0..len-1 (t = first frame)
@@ -91,6 +91,10 @@ class KnnSettings:
     query_noise: object = "auto"
     max_iterations: int = 20
     batch_frames: int = 256
+    #: a longer take is filled in pieces of about this many frames, each one read with
+    #: ``segment_overlap`` frames of the next and cross-faded into it (memory stays bounded)
+    segment_frames: int = 6000
+    segment_overlap: int = 600
     #: where the search and the local models' products run: "auto" (torch on a CUDA GPU, else
     #: torch on the CPU, else numpy when torch is absent), "numpy", "cpu" or "cuda" (torch)
     device: str = "auto"
@@ -298,14 +302,68 @@ def _apply_points(matrix, x):
     return out.reshape(len(matrix), t, c).transpose(1, 0, 2)
 
 
+def pieces(n_frames, size, overlap):
+    """The (start, stop) frame ranges a take is filled in: one range when it holds at most
+    ``size + overlap`` frames, else ranges of at most that length, each sharing ``overlap``
+    frames with the next."""
+    if n_frames <= size + overlap:
+        return [(0, n_frames)]
+    count = -(-(n_frames - overlap) // size)
+    step = -(-(n_frames - overlap) // count)
+    return [(i * step, min(n_frames, i * step + step + overlap)) for i in range(count)]
+
+
 def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=None, report=None):
     """Fill the gaps of ``motion`` from the knowledge base ``kb``.
 
     Returns a new :class:`~mocap_gapfill.core.motion.Motion` whose missing samples (of the points
     the knowledge base knows) are filled and marked in ``filled``; observed samples are kept.
+
+    A long take is filled piece by piece (:func:`pieces`): each piece exactly as if it were a
+    take of its own, the shared frames of two pieces cross-faded linearly from the one to the
+    other, so memory depends on the piece length only.
     """
-    report = report or (lambda message: None)
     progress = progress or (lambda fraction, message: None)
+    said = set()
+
+    def once(message):  # the pieces report the same things
+        if report and message not in said:
+            said.add(message)
+            report(message)
+
+    ranges = pieces(motion.n_frames, settings.segment_frames, settings.segment_overlap)
+    if len(ranges) == 1:
+        return _fill_piece(motion, kb, settings, progress, should_cancel, once)
+    out = np.array(motion.positions)
+    known = [motion.names.index(n) for n in match_names(kb, motion.names)[0]]
+    for i, (a, b) in enumerate(ranges):
+        def step(fraction, message, i=i):
+            progress((i + fraction) / len(ranges), f"part {i + 1} of {len(ranges)}: {message}")
+
+        piece = motion.frame_range(a, b)
+        if piece.missing[:, known].all():
+            once(f"frames {a}-{b - 1}: every sample is missing, left unfilled")
+            continue
+        done = _fill_piece(piece, kb, settings, step, should_cancel, once).positions
+        shared = ranges[i - 1][1] - a if i else 0  # frames also filled by the previous piece
+        w = (np.arange(shared) + 1.0) / (shared + 1.0)
+        prev = out[a:a + shared]
+        blend = np.where(np.isnan(prev), done[:shared],
+                         np.where(np.isnan(done[:shared]), prev,
+                                  prev * (1 - w[:, None, None]) + done[:shared] * w[:, None, None]))
+        out[a:a + shared] = blend
+        out[a + shared:b] = done[shared:]
+    observed = ~motion.missing
+    out[observed] = motion.positions[observed]  # exactly, not through the cross-fade
+    filled = motion.missing & ~np.isnan(out[..., 0])
+    if motion.filled is not None:
+        filled |= motion.filled
+    progress(1.0, "done")
+    return motion.replace(positions=out, filled=filled)
+
+
+def _fill_piece(motion, kb, settings, progress, should_cancel, report):
+    """:func:`fill_knn` of one piece."""
     common, lacking = match_names(kb, motion.names)
     if lacking:
         report(f"not in the knowledge base, left unfilled: {', '.join(lacking)}")
@@ -339,15 +397,15 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
         report(f"{int(empty.sum())} frames have fewer than {settings.min_present} points present: "
                "filled from the frames around them")
     masks = (missing, model, empty)
-    root, angle = frames_of(pos, reference)
+    template = np.median(index.poses[:, reference_points(reference)], axis=0)
+    root, angle = frames_of(pos, reference, template)
     cache = {}
     filled_pos = _fill_pass(pos, masks, root, angle, index, limbs, lengths, motion.fps,
                             settings, progress, should_cancel, cache, 0.0, 0.6)
-    ref_points = list({*reference.root, *reference.left, *reference.right})
-    if missing[:, ref_points].any():
+    if missing[:, reference_points(reference)].any():
         # the root or hips were in a gap: normalise again with their filled positions, and
         # model again the frames whose normalisation changed
-        root2, angle2 = frames_of(filled_pos, reference)
+        root2, angle2 = frames_of(filled_pos, reference, template)
         cache["changed"] = ((np.linalg.norm(root2 - root, axis=1) > CHANGE_ROOT)
                             | (np.abs(angle2 - angle) > CHANGE_ANGLE))
         filled_pos = _fill_pass(pos, masks, root2, angle2, index, limbs, lengths, motion.fps,
