@@ -12,6 +12,8 @@ import sys
 import numpy as np
 import pytest
 
+from mocap_gapfill.core.errors import ParseError
+
 WORKER = r"""
 import json, sys
 from mocap_gapfill.core.errors import ParseError
@@ -114,6 +116,25 @@ def test_gzip_bvh_with_bad_stream(tmp_path, data_dir):
     path.write_bytes(raw[:-20])
     (kind, detail), = read_isolated([(path, None)]).values()
     assert kind == "ParseError" and "gzip" in detail
+
+
+def test_gzip_bomb_and_gzip_in_several_members(tmp_path, data_dir, monkeypatch):
+    """A .bvh.gz that unzips past the size limit is refused after reading no more than the
+    limit; a file gzipped in two members (as `cat a.gz b.gz` makes) reads whole."""
+    from mocap_gapfill.core import formats
+    from mocap_gapfill.core.io import read_motion
+
+    text = gzip.decompress((data_dir / SOURCES[".bvh.gz"]).read_bytes())
+    two = tmp_path / "two.bvh.gz"
+    two.write_bytes(gzip.compress(text[:5000]) + gzip.compress(text[5000:]))
+    assert read_motion(two).n_frames == read_motion(data_dir / SOURCES[".bvh.gz"]).n_frames
+    monkeypatch.setattr(formats, "MAX_TEXT_BYTES", len(text) - 1)
+    with pytest.raises(ParseError, match="unzips to over"):
+        read_motion(two)
+    plain = tmp_path / "big.bvh"
+    plain.write_bytes(text)
+    with pytest.raises(ParseError, match="file too large"):
+        read_motion(plain)
 
 
 def test_missing_and_unknown_files(tmp_path):

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import ParseError
 from ..motion import Motion, skeleton_limbs, y_up_to_z_up
+from . import read_text_bytes
 from .kinematics import compose
 
 _DOF_AXES = {"rx": "x", "ry": "y", "rz": "z"}
@@ -60,11 +61,7 @@ class AsfSkeleton:
 
 
 def _lines(path):
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise ParseError(f"cannot read file ({exc.strerror})", path) from None
-    text = raw.decode("utf-8", errors="replace")
+    text = read_text_bytes(path).decode("utf-8", errors="replace")
     if "\x00" in text:
         raise ParseError("binary data in a text file", path)
     return text.splitlines()

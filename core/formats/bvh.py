@@ -5,14 +5,13 @@ optionally, every End Site). BVH has no unit field: the unit is guessed from the
 rest skeleton (see :func:`guess_units`) unless given.
 """
 
-import gzip
-import zlib
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import ParseError
 from ..motion import UNIT_SCALES, Motion, skeleton_limbs, snap_fps, units_for_height, y_up_to_z_up
+from . import read_text_bytes
 from .kinematics import compose
 
 _ROT = {"Xrotation": "x", "Yrotation": "y", "Zrotation": "z"}
@@ -41,15 +40,7 @@ class BvhFile:
 
 
 def _open_text(path):
-    try:
-        raw = open(path, "rb").read()
-    except OSError as exc:
-        raise ParseError(f"cannot read file ({exc.strerror})", path) from None
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError, zlib.error) as exc:
-            raise ParseError(f"corrupt gzip data ({exc})", path) from None
+    raw = read_text_bytes(path)
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError:

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import ParseError
 from ..motion import Motion, rigid_marker_pairs, skeleton_limbs
+from . import read_text_bytes
 
 NPZ_VERSION = 1
 
@@ -133,9 +134,8 @@ def write_csv(motion, fileobj):
 
 def read_csv(path):
     try:
-        with open(path, encoding="utf-8", newline="") as handle:
-            lines = handle.read().splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
+        lines = read_text_bytes(path).decode("utf-8").splitlines()
+    except UnicodeDecodeError as exc:
         raise ParseError(f"cannot read CSV ({exc})", path) from None
     if not lines or not lines[0].startswith("# mocap-gapfill csv"):
         raise ParseError("not a mocap-gapfill CSV (first line must be '# mocap-gapfill csv 1 "
