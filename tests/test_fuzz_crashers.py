@@ -13,7 +13,7 @@ import pytest
 import fuzz_inputs
 
 WORKER = r"""
-import json, sys
+import json, resource, sys
 sys.path.insert(0, sys.argv[1])
 import fuzz_inputs
 from mocap_gapfill.core.errors import GapFillError
@@ -23,7 +23,12 @@ try:
     print("read")
 except GapFillError as exc:
     print("GapFillError: " + str(exc))
+# peak memory of this process and of the C3D reader's child process, MB (Linux: kB units)
+print(max(resource.getrusage(who).ru_maxrss for who in
+          (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)) // 1024)
 """
+#: peak memory (MB) a read may reach (the C3D reader's child is capped at its start + 2 GB)
+MEMORY_MB = 3000
 
 CASES = fuzz_inputs.crashers()
 
@@ -49,4 +54,7 @@ def test_a_former_crasher_now_reads_or_fails_cleanly(data_dir, tmp_path, case):
                           input=json.dumps([fmt, str(path), partner and str(partner)]),
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert proc.stdout.startswith(("read", "GapFillError")), proc.stdout
+    outcome, peak_mb = proc.stdout.strip().rsplit("\n", 1)
+    assert outcome.startswith(("read", "GapFillError")), outcome
+    if sys.platform.startswith("linux"):
+        assert int(peak_mb) < MEMORY_MB, f"{peak_mb} MB"

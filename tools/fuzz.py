@@ -73,7 +73,7 @@ def fork_reader(path, out):
             os.close(read_end)
             os.dup2(write_end, 2)
             sys.argv = ["-c", str(path), str(out)]
-            exec(compile(c3d._READER, "<c3d reader>", "exec"), {"__name__": "__main__"})
+            exec(compile(c3d.reader_script(), "<c3d reader>", "exec"), {"__name__": "__main__"})
             code = 0
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else 1

@@ -29,9 +29,21 @@ MAX_FRAMES = 65535
 _UNITS = {"mm": ("mm", 0.001), "cm": ("cm", 0.01), "m": ("m", 1.0), "in": ("in", 0.0254)}
 #: seconds one read may take in the child process
 READ_TIMEOUT = 120
+#: address space (MB) the child process may take beyond its start and 32x the file's size
+READ_MEMORY_MB = 2048
 #: the child process: read with ezc3d, save what we need (no pickle), exit 3 on a reported error
 _READER = r"""
-import sys
+import os, sys
+for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[name] = "1"  # a read needs no threads (and each one reserves memory)
+try:  # a corrupt file can make ezc3d allocate without bound: cap this process's memory
+    import resource
+    with open("/proc/self/status") as status:
+        used = next(int(l.split()[1]) << 10 for l in status if l.startswith("VmSize:"))
+    cap = used + (READ_MEMORY_MB << 20) + 32 * os.path.getsize(sys.argv[1])
+    resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+except Exception:
+    pass  # no /proc (macOS, Windows): no cap
 import numpy as np
 import ezc3d
 try:
@@ -191,6 +203,11 @@ def _labels(raw, count):
     return names
 
 
+def reader_script():
+    """The child's Python code (:data:`_READER` with the memory cap filled in)."""
+    return _READER.replace("READ_MEMORY_MB", str(READ_MEMORY_MB))
+
+
 def _run_reader(path, out):
     """Run :data:`_READER` on ``path`` in a new Python process: (exit code, stderr).
 
@@ -198,7 +215,7 @@ def _run_reader(path, out):
     tools/fuzz.py, swaps in a forked child running the same code, to read faster.)
     """
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    proc = subprocess.run([sys.executable, "-c", _READER, str(path), str(out)], env=env,
+    proc = subprocess.run([sys.executable, "-c", reader_script(), str(path), str(out)], env=env,
                           capture_output=True, text=True, timeout=READ_TIMEOUT)
     return proc.returncode, proc.stderr
 
