@@ -8,6 +8,7 @@ import gzip
 import json
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -207,6 +208,13 @@ def test_a_file_that_hangs_ezc3d_gives_a_parse_error(data_dir, tmp_path, monkeyp
 
     path = _edited(data_dir, tmp_path, "hang0", EZC3D_HANG)
     assert _raw_ezc3d(path, 5) == "hang", "ezc3d no longer hangs on this file"
+    # ezc3d allocates without end here: under the reader's memory cap it stops at once
+    start = time.monotonic()
+    with pytest.raises(ParseError, match="unreadable C3D"):
+        c3d.read_c3d(path)
+    assert time.monotonic() - start < 10
+    # without the cap, the time limit stops it
+    monkeypatch.setattr(c3d, "READ_MEMORY_MB", 1 << 20)
     monkeypatch.setattr(c3d, "READ_TIMEOUT", 3)
     with pytest.raises(ParseError, match="took over 3 s"):
         c3d.read_c3d(path)
