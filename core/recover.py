@@ -91,6 +91,9 @@ class KnnSettings:
     query_noise: object = "auto"
     max_iterations: int = 20
     batch_frames: int = 256
+    #: local models are fitted at most this often per second (Hz); frames in between with the
+    #: same missing points share the model before them (None: every frame)
+    model_fps: float = 60.0
     #: a longer take is filled in pieces of about this many frames, each one read with
     #: ``segment_overlap`` frames of the next and cross-faded into it (memory stays bounded)
     segment_frames: int = 6000
@@ -437,9 +440,10 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
     rng = np.random.default_rng(settings.random_state)
     m = len(frames)
     d = 3 * n
+    source = _model_sources(frames, model, fps, settings.model_fps)
     if "models" in cache:
         means, comps, lams, noise, spread = cache["models"]
-        todo = np.flatnonzero(cache["changed"][frames])
+        todo = np.unique(source[cache["changed"][frames]])
     else:
         means = np.empty((m, d))
         comps = np.empty((m, d, min(settings.max_components, d, settings.k - 1)))
@@ -447,7 +451,7 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
         noise = np.empty(m)
         spread = np.zeros(m)
         cache["models"] = (means, comps, lams, noise, spread)
-        todo = np.arange(m)
+        todo = np.unique(source)
     for start in range(0, len(todo), settings.batch_frames):
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
@@ -457,8 +461,12 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
             index, obs_norm[sel], model[sel], settings, rng)
         progress(p0 + (p1 - p0) * 0.7 * (start + len(sel)) / max(1, len(todo)),
                  "searching and fitting local models")
+    shared = np.flatnonzero(source != np.arange(m))
+    for array in (means, comps, lams, noise, spread):
+        array[shared] = array[source[shared]]
     if "factor" not in cache:
-        cache["factor"] = (_noise_factor(obs_norm, model, frames, index, settings, rng)
+        cache["factor"] = (_noise_factor(obs_norm, model, frames, index, settings,
+                                         np.random.default_rng([settings.random_state, 1]))
                            if settings.query_noise == "auto" else float(settings.query_noise))
     level = np.maximum(noise, cache["factor"] * spread)
     problem = _Problem(frames, obs_norm[frames], model[frames], means, comps, lams, level, root,
@@ -485,6 +493,21 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
         trajectory[empty] = np.nan
         pred[empty] = fill_linear(trajectory)[empty]
     return _blend_into_gaps(pos, pred, missing, model)
+
+
+def _model_sources(frames, model, fps, model_fps):
+    """For each modelled frame (row of ``frames``), the row whose local model it uses: itself,
+    or, above ``model_fps``, the frame that starts its stretch of ``round(fps / model_fps)``
+    consecutive frames with the same missing points (poses a few ms apart have the same
+    neighbours; each frame still gets its own coefficients)."""
+    rows = np.arange(len(frames))
+    step = 1 if not model_fps else max(1, int(round(fps / model_fps)))
+    if step == 1 or not len(frames):
+        return rows
+    same = np.zeros(len(frames), bool)
+    same[1:] = (np.diff(frames) == 1) & (model[frames[1:]] == model[frames[:-1]]).all(axis=1)
+    start = np.maximum.accumulate(np.where(same, 0, rows))
+    return start + (rows - start) // step * step
 
 
 def _clip_lengths(pos, limbs, kb_poses):
