@@ -224,3 +224,26 @@ def test_auto_takes_the_better_method_per_point(daz_kb, data_dir):
                   for m in ("knn", "spline", "auto")}
         print(f"\n{Path(truth.source).name}: {scores}")
         assert scores["auto"] <= 1.1 * min(scores["knn"], scores["spline"])
+
+
+def test_local_models_are_shared_above_60_fps(data_dir):
+    """At 120 fps every other frame reuses the local model before it (same missing points):
+    half the models, the same accuracy."""
+    from dataclasses import replace
+
+    from mocap_gapfill.core.recover import _model_sources, fill_knn
+
+    frames = np.array([0, 1, 2, 3, 4, 7, 8, 9])
+    model = np.zeros((10, 2), bool)
+    model[[0, 1, 2, 3, 4, 7, 8, 9], 0] = True
+    model[3:5, 1] = True  # frames 3-4 miss another point: a new stretch
+    assert _model_sources(frames, model, 120.0, 60.0).tolist() == [0, 0, 2, 3, 3, 5, 5, 7]
+    assert _model_sources(frames, model, 60.0, 60.0).tolist() == list(range(8))
+    kb = build_kb([data_dir / "hdm05/c3d"], stride=4)
+    truth = read_motion(data_dir / "cmu/c3d/85_02.c3d")
+    miss = punch_gaps(truth.n_frames, truth.n_points, "markers", 0.2, np.random.default_rng(1))
+    gapped = with_gaps(truth, miss)
+    every = KnnSettings(k=128, device="numpy", model_fps=None)
+    errors = [rmse_mm(fill_knn(gapped, kb, s), truth, miss)
+              for s in (every, replace(every, model_fps=60.0))]
+    assert abs(errors[1] - errors[0]) < 0.03 * errors[0]
