@@ -8,6 +8,7 @@
    memory (max RSS of a fresh process for the stage).
 
 Usage: OMP_NUM_THREADS=2 .venv/bin/python tools/bench_engine.py [--repeat 3] [--json OUT]
+[--device auto|numpy|cpu|cuda] [--skip-search]
 """
 
 import argparse
@@ -61,7 +62,7 @@ def stage_search(repeat):
             "speedup_vs_ckdtree": statistics.median(kd) / statistics.median(ours)}
 
 
-def stage_fill(repeat, k=None):
+def stage_fill(repeat, k=None, device="auto"):
     import numpy as np
 
     from mocap_gapfill.core.evaluate import punch_gaps, rmse_mm, with_gaps
@@ -79,17 +80,18 @@ def stage_fill(repeat, k=None):
     times = []
     for _ in range(repeat):
         t = time.perf_counter()
-        out = fill(query, "knn", kb=kb, settings=KnnSettings(k=k))
+        out = fill(query, "knn", kb=kb, settings=KnnSettings(k=k, device=device))
         times.append(time.perf_counter() - t)
     return {"kb_size": kb.size, "frames": 2048, "fps": take.fps, "k": k or "default (1024)",
+            "device": device,
             "kb_build_s": build, "fill_median_s": statistics.median(times),
             "rmse_missing_mm": rmse_mm(out, take, miss)}
 
 
-def run_stage(name, repeat):
+def run_stage(name, repeat, device="auto"):
     """Run one stage in a fresh interpreter; its result plus that process's peak RSS."""
-    proc = subprocess.run([sys.executable, __file__, "--stage", name, "--repeat", str(repeat)],
-                          capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, __file__, "--stage", name, "--repeat", str(repeat),
+                           "--device", device], capture_output=True, text=True)
     if proc.returncode:
         sys.exit(proc.stderr)
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -100,28 +102,34 @@ def main():
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--stage", choices=["search", "fill", "fill256"])
     parser.add_argument("--json")
+    parser.add_argument("--device", default="auto", help="the fill's (auto, numpy, cpu, cuda)")
+    parser.add_argument("--skip-search", action="store_true")
     args = parser.parse_args()
     if args.stage:
-        result = {"search": stage_search, "fill": stage_fill,
-                  "fill256": lambda r: stage_fill(r, k=256)}[args.stage](args.repeat)
+        result = {"search": stage_search,
+                  "fill": lambda r: stage_fill(r, device=args.device),
+                  "fill256": lambda r: stage_fill(r, k=256, device=args.device)}[args.stage](args.repeat)
         result["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         print(json.dumps(result))
         return
     machine = {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
                "threads": os.environ.get("OMP_NUM_THREADS"), "python": platform.python_version()}
-    search = run_stage("search", args.repeat)
-    print(f"search: {search['queries']} queries x {search['kb_size']} poses, K={search['k']}, "
-          f"{search['dims']} dims")
-    print(f"  ours (exact, blocked GEMM)  median {1000 * search['ours_median_s']:8.0f} ms")
-    print(f"  scipy cKDTree query         median {1000 * search['ckdtree_query_median_s']:8.0f} ms"
-          f"  (+ build {1000 * search['ckdtree_build_s']:.0f} ms)")
-    print(f"  speed-up over cKDTree       {search['speedup_vs_ckdtree']:8.1f} x")
-    fills = [run_stage("fill", args.repeat), run_stage("fill256", args.repeat)]
+    search = None
+    if not args.skip_search:
+        search = run_stage("search", args.repeat)
+        print(f"search: {search['queries']} queries x {search['kb_size']} poses, K={search['k']}, "
+              f"{search['dims']} dims")
+        print(f"  ours (exact, blocked GEMM)  median {1000 * search['ours_median_s']:8.0f} ms")
+        print(f"  scipy cKDTree query         median {1000 * search['ckdtree_query_median_s']:8.0f}"
+              f" ms  (+ build {1000 * search['ckdtree_build_s']:.0f} ms)")
+        print(f"  speed-up over cKDTree       {search['speedup_vs_ckdtree']:8.1f} x")
+    fills = [run_stage("fill", args.repeat, args.device),
+             run_stage("fill256", args.repeat, args.device)]
     print(f"fill: {fills[0]['frames']} frames at {fills[0]['fps']:g} fps, 6 joints missing per "
           f"120-frame interval, KB {fills[0]['kb_size']} poses (built in "
           f"{fills[0]['kb_build_s']:.1f} s; other takes of the test subject are in it)")
     for fill in fills:
-        print(f"  knn fill, K {fill['k']!s:14s} median {fill['fill_median_s']:6.2f} s, "
+        print(f"  knn fill ({fill['device']}), K {fill['k']!s:14s} median {fill['fill_median_s']:6.2f} s, "
               f"peak RSS {fill['peak_rss_mb']:.0f} MB, RMSE missing {fill['rmse_missing_mm']:.1f} mm")
     if args.json:
         Path(args.json).write_text(json.dumps({"machine": machine, "search": search,
