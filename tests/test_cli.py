@@ -131,7 +131,9 @@ def test_ctrl_c_stops_cleanly_and_writes_nothing(data_dir, tmp_path):
     assert proc.poll() is None, "the fill ended before it could be interrupted"
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130, err
+    # 130, or killed by SIGINT (-2), which a shell also reports as 130: seen once under heavy
+    # load on Python 3.13 after our handler had run (the message below was printed)
+    assert proc.returncode in (130, -signal.SIGINT), err
     assert "interrupted: nothing was written" in err and "Traceback" not in err
     assert not out.exists() and not list(tmp_path.glob(".filled*"))
 
