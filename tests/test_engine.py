@@ -75,6 +75,21 @@ def test_knowledge_base_round_trip_and_checks(daz_kb, tmp_path):
     np.savez(tmp_path / "pickled.npz", **arrays)
     with pytest.raises(ParseError, match="not a knowledge-base file"):
         load_kb(tmp_path / "pickled.npz")
+    # a number stored as text, and a member not stored as .npy (numpy returns its bytes): both
+    # used to escape as ValueError / AttributeError
+    arrays["names"] = np.array(daz_kb.names)
+    arrays["fps"] = np.array("sixty")
+    np.savez(tmp_path / "text_fps.npz", **arrays)
+    with pytest.raises(ParseError, match="fps must be one number"):
+        load_kb(tmp_path / "text_fps.npz")
+    import zipfile
+
+    del arrays["fps"]
+    np.savez(tmp_path / "raw_fps.npz", **arrays)
+    with zipfile.ZipFile(tmp_path / "raw_fps.npz", "a") as archive:
+        archive.writestr("fps", b"not a number")
+    with pytest.raises(ParseError, match="lacks fps"):
+        load_kb(tmp_path / "raw_fps.npz")
 
 
 def test_mismatched_knowledge_base_names_what_is_missing(daz_kb, data_dir):
