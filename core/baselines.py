@@ -70,15 +70,14 @@ def fill_svt(pos, rank_fraction=0.02, iterations=200, tol=1e-5):
 
 def fill_global_pca(pos, kb_poses, reference, components=18, ridge=1e-6):
     """Knowledge-base PCA fitted per normalised frame to the present points."""
-    from .normalize import denormalize, frames_of, normalize, reference_points
+    from .normalize import denormalize, frames_of, normalize, reference_template
 
     frames, n = pos.shape[:2]
     flat = kb_poses.reshape(len(kb_poses), -1).astype(np.float64)
     mean = flat.mean(axis=0)
     _, _, vt = np.linalg.svd(flat[:: max(1, len(flat) // 20000)] - mean, full_matrices=False)
     basis = vt[:components].T  # (d, c)
-    template = np.median(kb_poses[:, reference_points(reference)], axis=0)
-    root, angle = frames_of(pos, reference, template)
+    root, angle = frames_of(pos, reference, reference_template(kb_poses, reference))
     x = normalize(pos, root, angle).reshape(frames, -1)
     known = np.isfinite(x)
     out = x.copy()

@@ -99,7 +99,7 @@ def load_kb(path):
                          f"mocap-gapfill understands ({KB_VERSION}): update mocap-gapfill", path)
     if version < 1:
         raise ParseError(f"bad format_version {version}", path)
-    poses, names = arrays["poses"], arrays["names"]
+    poses = arrays["poses"]
     if poses.dtype != np.float32 or poses.ndim != 3 or poses.shape[2] != 3 or not poses.size:
         raise ParseError(f"poses must be float32 (poses, points, 3), got {poses.dtype} "
                          f"{poses.shape}", path)
@@ -109,13 +109,12 @@ def load_kb(path):
     fps = float(scalar(arrays, "fps", "fiu", path))
     limbs = arrays["limbs"]
     index = arrays["source_index"]
-    sources = arrays["sources"]
     if not (np.isfinite(fps) and fps > 0):
         raise ParseError(f"bad fps {fps}", path)
     if limbs.dtype.kind != "i" or limbs.ndim != 2 or limbs.shape[1] != 2 or (limbs.size and (
             limbs.min() < 0 or limbs.max() >= len(names))):
         raise ParseError("bad limbs array", path)
-    sources = strings(arrays, "sources", sources.shape[:1], path) if sources.ndim == 1 else []
+    sources = strings(arrays, "sources", (arrays["sources"].size,), path)
     if not sources:
         raise ParseError("sources must be a list of strings", path)
     if index.shape != (len(poses),) or index.dtype.kind != "i" or (

@@ -153,6 +153,12 @@ def reference_points(reference):
     return sorted({*reference.root, *reference.left, *reference.right})
 
 
+def reference_template(poses, reference):
+    """The median normalised positions of :func:`reference_points` over (knowledge-base) poses:
+    the ``template`` of :func:`frames_of`."""
+    return np.median(np.asarray(poses)[:, reference_points(reference)], axis=0)
+
+
 def _fit_template(pos, reference, template):
     """Root and angle of each frame from a rigid fit (turn about Z, shift) of the template
     (normalised positions of :func:`reference_points`) to those of them present; frames with

@@ -35,7 +35,8 @@ from .baselines import fill_linear
 from .errors import GapFillError
 from .kb import match_names
 from .motion import gap_runs
-from .normalize import denormalize, frames_of, normalize, reference_points, rotation_z
+from .normalize import (denormalize, frames_of, normalize, reference_points,
+                        reference_template, rotation_z)
 from .search import KBIndex
 
 #: smoothness kernels: residual_t = sum_j c_j X_{t+j} for j = 0..len-1 (t = first frame)
@@ -400,7 +401,7 @@ def _fill_piece(motion, kb, settings, progress, should_cancel, report):
         report(f"{int(empty.sum())} frames have fewer than {settings.min_present} points present: "
                "filled from the frames around them")
     masks = (missing, model, empty)
-    template = np.median(index.poses[:, reference_points(reference)], axis=0)
+    template = reference_template(index.poses, reference)
     root, angle = frames_of(pos, reference, template)
     cache = {}
     filled_pos = _fill_pass(pos, masks, root, angle, index, limbs, lengths, motion.fps,

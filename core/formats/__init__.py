@@ -15,8 +15,9 @@ def read_text_bytes(path):
     :data:`MAX_TEXT_BYTES`; :class:`ParseError` otherwise."""
     path = Path(path)
     try:
-        if path.stat().st_size > MAX_TEXT_BYTES:
-            raise ParseError(f"file too large ({path.stat().st_size >> 20} MB; at most "
+        on_disk = path.stat().st_size
+        if on_disk > MAX_TEXT_BYTES:
+            raise ParseError(f"file too large ({on_disk >> 20} MB; at most "
                              f"{MAX_TEXT_BYTES >> 20} MB)", path)
         raw = path.read_bytes()
     except OSError as exc:
@@ -24,7 +25,7 @@ def read_text_bytes(path):
     if raw[:2] != b"\x1f\x8b":
         return raw
     out = []
-    size = 0
+    size = 0  # unzipped so far
     while raw[:2] == b"\x1f\x8b":  # one gzip member after another
         unzip = zlib.decompressobj(16 + zlib.MAX_WBITS)
         try:
