@@ -7,10 +7,13 @@ that turn the seed into the crashing input (``encode`` / ``decode``). Used by to
 fuzzing harness) and tests/test_fuzz_crashers.py (the regression tests).
 """
 
+import dataclasses
 import difflib
+import gzip
+import hashlib
 import io
 import json
-import re
+import tempfile
 from pathlib import Path
 
 CRASHERS = Path(__file__).resolve().parent / "fuzz_crashers"
@@ -38,8 +41,6 @@ def seeds(fmt, data):
     """{name: bytes} of small valid files of one format, made from the real data."""
     data = Path(data)
     if fmt == "bvh":
-        import gzip
-
         mb = (data / "cmu/bvh/mb_friendly/01_01.bvh").read_text()
         daz = gzip.decompress((data / "cmu/bvh/daz_friendly/03/03_02.bvh.gz").read_bytes())
         return {"mb_01_01": _bvh_cut(mb, 12).encode(), "daz_03_02": _bvh_cut(daz.decode(), 6).encode()}
@@ -60,33 +61,29 @@ def seeds(fmt, data):
     raise ValueError(f"unknown format {fmt}")
 
 
+def _file_bytes(save, name):
+    """The bytes ``save(path)`` writes to a file called ``name``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / name
+        save(out)
+        return out.read_bytes()
+
+
 def _written(path, frames, fmt):
     """The first frames of a real file, written by our own writer in format ``fmt``."""
-    import tempfile
-
     from mocap_gapfill.core.io import read_motion, write_motion
 
     motion = read_motion(path).frame_range(0, frames)
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / f"seed.{fmt}"
-        write_motion(motion, out)
-        return out.read_bytes()
+    return _file_bytes(lambda out: write_motion(motion, out), f"seed.{fmt}")
 
 
 def _kb_bytes(path, frames):
     from mocap_gapfill.core.io import read_motion
     from mocap_gapfill.core.kb import kb_from_motions
 
-    import dataclasses
-    import tempfile
-
     kb = kb_from_motions([read_motion(path).frame_range(0, frames)])
     kb = dataclasses.replace(kb, sources=(path.name,))  # the same bytes wherever the data is
-
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "seed.npz"
-        kb.save(out)
-        return out.read_bytes()
+    return _file_bytes(kb.save, "seed.npz")
 
 
 def partner(fmt, data):
@@ -98,6 +95,19 @@ def partner(fmt, data):
     if fmt == "amc":
         return ".asf", (data / "cmu/asfamc/09/09.asf").read_bytes()
     return None
+
+
+def input_paths(fmt, folder, data):
+    """Where an input of ``fmt`` goes in ``folder``, and the partner file it is read with
+    (written there; None for formats read alone)."""
+    folder = Path(folder)
+    path = folder / ("input.npz" if fmt == "kb" else f"input.{fmt}")
+    pair = partner(fmt, data)
+    if pair is None:
+        return path, None
+    suffix, raw = pair
+    (folder / f"partner{suffix}").write_bytes(raw)
+    return path, folder / f"partner{suffix}"
 
 
 def read_as_user(fmt, path, partner=None):
@@ -137,7 +147,7 @@ def decode(seed, edits):
 def save_crasher(fmt, seed_name, seed, data, note):
     """Keep a crashing input as edits of its seed; returns the file written."""
     CRASHERS.mkdir(exist_ok=True)
-    key = re.sub(r"[^0-9a-f]", "", __import__("hashlib").sha1(data).hexdigest())[:12]
+    key = hashlib.sha1(data).hexdigest()[:12]
     path = CRASHERS / f"{fmt}-{key}.json"
     path.write_text(json.dumps({"format": fmt, "seed": seed_name, "edits": encode(seed, data),
                                 "note": note}, indent=1) + "\n")

@@ -43,13 +43,8 @@ def test_a_former_crasher_now_reads_or_fails_cleanly(data_dir, tmp_path, case):
     _, record = case
     fmt = record["format"]
     seed = fuzz_inputs.seeds(fmt, data_dir)[record["seed"]]
-    path = tmp_path / ("input.npz" if fmt == "kb" else f"input.{fmt}")
+    path, partner = fuzz_inputs.input_paths(fmt, tmp_path, data_dir)
     path.write_bytes(fuzz_inputs.decode(seed, record["edits"]))
-    partner = None
-    if fuzz_inputs.partner(fmt, data_dir):
-        suffix, raw = fuzz_inputs.partner(fmt, data_dir)
-        partner = tmp_path / f"partner{suffix}"
-        partner.write_bytes(raw)
     proc = subprocess.run([sys.executable, "-c", WORKER, str(Path(fuzz_inputs.__file__).parent)],
                           input=json.dumps([fmt, str(path), partner and str(partner)]),
                           capture_output=True, text=True, timeout=120)

@@ -2,12 +2,13 @@
 
     python tools/fuzz.py FORMAT --runs 100000 --work /tmp/fuzz/FORMAT [--data ../shared/data]
 
-FORMAT is c3d, bvh, asf, amc, kb (knowledge bases), npz or csv (our motion tables). Every input is written to a file and read the way users read
-it (``read_motion``; ``load_kb`` and the checks a fill makes for a knowledge base). An input must
-end in a successful read or in our own error type (``GapFillError``); anything else - another
-exception, a crash, a hang over ``--timeout`` seconds, memory over ``--rss-mb`` - stops libFuzzer,
-which leaves the input in the work folder (``crash-*``, ``timeout-*``, ``oom-*``); the tool then
-keeps it in tests/fuzz_crashers/ as edits of its seed (see tests/fuzz_inputs.py).
+FORMAT is c3d, bvh, asf, amc, kb (knowledge bases), npz or csv (our motion tables). Every input
+is written to a file and read the way users read it (``read_motion``; ``load_kb`` and the checks
+a fill makes for a knowledge base). An input must end in a successful read or in our own error
+type (``GapFillError``); anything else - another exception, a crash, a hang over ``--timeout``
+seconds, memory over ``--rss-mb`` - stops libFuzzer, which leaves the input in the work folder
+(``crash-*``, ``timeout-*``, ``oom-*``); the tool then keeps it in tests/fuzz_crashers/ as edits
+of its seed (see tests/fuzz_inputs.py).
 
 The code under test is instrumented for coverage (``atheris.instrument_imports``), so inputs
 that reach new lines or branches of our readers are kept and mutated further. The seed corpus is
@@ -20,6 +21,7 @@ Outcomes are counted in ``WORK/stats.json`` (rewritten every 500 inputs and at t
 import argparse
 import json
 import os
+import random
 import re
 import resource
 import select
@@ -28,7 +30,9 @@ import subprocess
 import sys
 import tempfile
 import time
+import zipfile
 from collections import Counter
+from io import BytesIO
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -99,14 +103,15 @@ def fork_reader(path, out):
     return os.waitstatus_to_exitcode(status), err.decode(errors="replace")
 
 
-def zip_mutator(data, max_size, seed):
-    """Mutations inside an .npz (knowledge base or motion): one member's .npy bytes (header or values)
-    mutated, a member dropped, duplicated or renamed, then zipped again with valid checksums;
-    one time in five the zip's own bytes."""
-    import random
-    import zipfile
-    from io import BytesIO
+#: array names of knowledge-base and motion .npz files (a mutated member may take one)
+NPZ_MEMBERS = ["format_version", "poses", "names", "fps", "limbs", "sources", "source_index",
+               "reference", "positions", "parents", "filled"]
 
+
+def zip_mutator(data, max_size, seed):
+    """Mutations inside an .npz (knowledge base or motion): one member's .npy bytes (header or
+    values) mutated, a member dropped, duplicated or renamed, then zipped again with valid
+    checksums; one time in five the zip's own bytes."""
     rnd = random.Random(seed)
     try:
         with zipfile.ZipFile(BytesIO(data)) as archive:
@@ -122,17 +127,13 @@ def zip_mutator(data, max_size, seed):
     elif action < 0.9:
         del members[name]
     else:
-        other = rnd.choice(fuzz_inputs_kb_names)
+        other = rnd.choice(NPZ_MEMBERS)
         members[other + ".npy"] = members[name]
     out = BytesIO()
     with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as archive:
         for key, raw in members.items():
             archive.writestr(key, raw)
     return out.getvalue()[:max_size]
-
-
-fuzz_inputs_kb_names = ["format_version", "poses", "names", "fps", "limbs", "sources",
-                        "source_index", "reference", "positions", "parents", "filled"]
 
 
 NUMBERS = [b"0", b"-0", b"1", b"-1", b"0.5", b"1e308", b"-1e308", b"1e-320", b"nan", b"inf",
@@ -142,8 +143,6 @@ NUMBERS = [b"0", b"-0", b"1", b"-1", b"0.5", b"1e308", b"-1e308", b"1e-320", b"n
 def text_mutator(data, max_size, seed):
     """Mutations that keep a text file's shape: a number replaced by an odd one (huge, tiny,
     NaN, infinite, negative) or scaled, a line deleted, duplicated or swapped; else bytes."""
-    import random
-
     rnd = random.Random(seed)
     lines = data.split(b"\n")
     if len(lines) < 2 or rnd.random() < 0.35:
@@ -183,12 +182,7 @@ class Target:
     def __init__(self, fmt, data, work, runs):
         self.fmt, self.work, self.runs = fmt, work, runs
         self.tmp = Path(tempfile.mkdtemp(prefix=f"fuzz_{fmt}_"))
-        self.file = self.tmp / {"kb": "input.npz"}.get(fmt, f"input.{fmt}")
-        self.partner = None
-        if fuzz_inputs.partner(fmt, data):
-            suffix, raw = fuzz_inputs.partner(fmt, data)
-            self.partner = self.tmp / f"partner{suffix}"
-            self.partner.write_bytes(raw)
+        self.file, self.partner = fuzz_inputs.input_paths(fmt, self.tmp, data)
         self.counts = Counter()
         self.start = time.time()
         self.slowest = 0.0

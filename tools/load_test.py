@@ -87,7 +87,8 @@ def main():
         "rmse_missing_mm": {"knn": round(rmse_mm(whole, truth, scored), 2),
                             "linear": round(rmse_mm(linear, truth, scored), 2)},
         "unfilled": int((take.missing & np.isnan(whole.positions[..., 0])).sum()),
-        "observed_changed": int((~take.missing & (whole.positions != take.positions).any(axis=2)).sum()),
+        "observed_changed": int((~take.missing
+                                 & (whole.positions != take.positions).any(axis=2)).sum()),
     }
     print(json.dumps(result, indent=1))
 
