@@ -203,10 +203,10 @@ def _model_and_fill(base, take, names, rng, quick, repeat, add):
             index = KBIndex(poses, device)
             for k in KS:
                 idx, _ = index.search(q, present, k, ordered=False)
-                neighbours = poses.reshape(size, -1)[idx]
                 settings = KnnSettings(k=k)
 
-                def model():
+                def model():  # gathers the neighbours as a fill does (centred in place)
+                    neighbours = poses.reshape(size, -1)[idx]
                     mean, comps, lams, noise = _local_pca(neighbours, settings, rng,
                                                           index.backend)
                     _closed_form(~present, q, mean, comps, lams, noise, settings)

@@ -94,7 +94,7 @@ class KnnSettings:
     batch_frames: int = 256
     #: local models are fitted at most this often per second (Hz); frames in between with the
     #: same missing points share the model before them (None: every frame)
-    model_fps: float = 60.0
+    model_fps: float = 30.0
     #: a longer take is filled in pieces of about this many frames, each one read with
     #: ``segment_overlap`` frames of the next and cross-faded into it (memory stays bounded)
     segment_frames: int = 6000
@@ -108,24 +108,26 @@ class KnnSettings:
 def _local_pca(neighbours, settings, rng, backend):
     """Top principal components of each frame's neighbours (batched subspace iteration).
 
-    neighbours: (t, k, d), float32 or float64. Returns mean (t, d), components (t, d, r) with
-    the eigenvalues (t, r) of unused components set to 0, and the noise variance (t,): the mean
-    variance the used components leave out (probabilistic PCA).
+    neighbours: (t, k, d) float32, centred in place. Returns mean (t, d), components (t, d, r)
+    with the eigenvalues (t, r) of unused components set to 0, and the noise variance (t,): the
+    mean variance the used components leave out (probabilistic PCA); float64. The covariance and
+    the iteration are float32 like the poses (the eigenvalues that matter lie far above its
+    rounding), sums and the results float64.
     """
     t, k, d = neighbours.shape
     mean = neighbours.mean(axis=1, dtype=np.float64)
-    a = neighbours - mean[:, None, :].astype(neighbours.dtype)
-    cov = backend.gram(a) / max(1, k - 1)
-    total = np.trace(cov, axis1=1, axis2=2)
+    neighbours -= mean[:, None, :].astype(neighbours.dtype)
+    cov = backend.gram(neighbours) / np.float32(max(1, k - 1))
+    total = np.trace(cov, axis1=1, axis2=2, dtype=np.float64)
     r = min(settings.max_components, d, k - 1)
-    y = cov @ rng.standard_normal((d, min(d, r + OVERSAMPLE)))
+    y = cov @ rng.standard_normal((d, min(d, r + OVERSAMPLE))).astype(cov.dtype)
     for _ in range(POWER_ITERATIONS):
         y = cov @ _orthonormal(y)
     basis = _orthonormal(y)  # (t, d, r+8)
     small = basis.transpose(0, 2, 1) @ cov @ basis
     lam, vec = np.linalg.eigh(small)
-    lam, vec = lam[:, ::-1][:, :r], vec[:, :, ::-1][:, :, :r]
-    comps = basis @ vec
+    lam, vec = lam[:, ::-1][:, :r].astype(np.float64), vec[:, :, ::-1][:, :, :r]
+    comps = (basis @ vec).astype(np.float64)
     lam = np.clip(lam, 0, None)
     captured = np.cumsum(lam, axis=1) / np.maximum(total, 1e-30)[:, None]
     used = np.concatenate([np.ones((t, 1), bool), captured[:, :-1] < settings.variance], axis=1)
@@ -146,6 +148,9 @@ class _Problem:
                  limbs, lengths, fps, settings, world_obs):
         m, n = model_missing.shape
         self.frames = frames  # modelled frame indices into the clip
+        # only the components some frame uses (they come first): the products cost less
+        r = max(1, int((lam > 0).sum(axis=1).max()))
+        comps, lam = np.ascontiguousarray(comps[:, :, :r]), lam[:, :r]
         self.miss = model_missing  # (m, n) bool: points the model provides
         self.miss3 = model_missing[..., None]
         self.present3 = ~self.miss3
@@ -158,12 +163,13 @@ class _Problem:
         self.root = root[frames][:, None, :]
         self.s = settings
         self.lengths = lengths
-        # limbs with a modelled end, as a signed incidence matrix (limbs, points)
+        # limbs with a modelled end; the signed incidence matrix (points, limbs) gathers their
+        # gradients onto the points
         self.limbs = limbs
-        self.incidence = np.zeros((len(limbs), n))
+        self.incidence_t = np.zeros((n, len(limbs)))
         if len(limbs):
-            self.incidence[np.arange(len(limbs)), limbs[:, 0]] = 1.0
-            self.incidence[np.arange(len(limbs)), limbs[:, 1]] = -1.0
+            self.incidence_t[limbs[:, 0], np.arange(len(limbs))] = 1.0
+            self.incidence_t[limbs[:, 1], np.arange(len(limbs))] = -1.0
             self.limb_active = self.miss[:, limbs[:, 0]] | self.miss[:, limbs[:, 1]]
         self.world = world_obs.copy()  # the clip in world coordinates; modelled values go in
         self.kernel = KERNELS[settings.smoothness]
@@ -199,12 +205,12 @@ class _Problem:
         # the modelled pose where the model provides points, observations elsewhere
         full = np.where(self.miss3, pose, self.obs)
         if len(self.limbs) and s.w_l:
-            vec = _apply_points(self.incidence, full)
+            vec = full[:, self.limbs[:, 0]] - full[:, self.limbs[:, 1]]
             length = np.sqrt((vec * vec).sum(axis=2))
             err = np.where(self.limb_active, length - self.lengths, 0.0) / s.limb_scale
             e += s.w_l * (err * err).sum()
             g = (2 * s.w_l / s.limb_scale) * err / np.maximum(length, 1e-9)
-            grad_pose += _apply_points(self.incidence.T, g[..., None] * vec) * self.miss3
+            grad_pose += (self.incidence_t @ (g[..., None] * vec)) * self.miss3
         if s.w_s and self.span > 0:
             world = self.world
             world[self.frames] = np.where(self.miss3, full @ self.rot_t + self.root,
@@ -246,8 +252,7 @@ def _fit_models(index, queries, mask, settings, rng):
     Returns the :func:`_local_pca` arrays (means, comps, lams, noise) and the spread (q,).
     """
     idx, dist2 = index.search(queries, ~mask, settings.k, ordered=False)
-    neighbours = index.poses.reshape(index.n, -1)[idx]  # float32: covariance summed in float32
-    means, comps, lams, noise = _local_pca(neighbours, settings, rng, index.backend)
+    means, comps, lams, noise = _local_pca(index.gather(idx), settings, rng, index.backend)
     n = mask.shape[1]
     present = (~mask).sum(axis=1)
     spread = ((n - present) / n) * np.median(dist2, axis=1) / (3 * np.maximum(present, 1))
@@ -297,13 +302,6 @@ def _noise_factor(obs_norm, model, frames, index, settings, rng):
         pose = _poses(means, comps, h).reshape(obs.shape)
         errors.append(float(((pose - obs) ** 2)[hidden].sum()))
     return NOISE_FACTORS[int(np.argmin(errors))]
-
-
-def _apply_points(matrix, x):
-    """``matrix @ x[t]`` for every frame t of x (frames, points, 3), as one 2-D GEMM."""
-    t, n, c = x.shape
-    out = matrix @ x.transpose(1, 0, 2).reshape(n, t * c)
-    return out.reshape(len(matrix), t, c).transpose(1, 0, 2)
 
 
 def pieces(n_frames, size, overlap):

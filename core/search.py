@@ -41,6 +41,17 @@ class KBIndex:
         # the matrix every query block multiplies: [k, |k_i|^2], transposed for a fast GEMM
         self.backend = resolve(device).prepare(np.concatenate([flat, sq], axis=1).T)
         self._flat = flat
+        self._buffer = np.empty(0, np.float32)
+
+    def gather(self, idx):
+        """The flat float32 poses of ``idx`` (q, k): shape (q, k, points * 3), written into a
+        buffer that the next call reuses (a fresh array of this size costs more in page faults
+        than the copy itself)."""
+        need = idx.size * self._flat.shape[1]
+        if self._buffer.size < need:
+            self._buffer = np.empty(need, np.float32)
+        out = self._buffer[:need].reshape(*idx.shape, self._flat.shape[1])
+        return np.take(self._flat, idx, axis=0, out=out, mode="clip")
 
     def search(self, queries, present, k, ordered=True, progress=None, should_cancel=None):
         """Exact K nearest poses for each query over its present points.
