@@ -82,8 +82,8 @@ class MOCAP_GAPFILL_PG_scene(bpy.types.PropertyGroup):
     kb_path: StringProperty(name="Knowledge base", subtype="FILE_PATH",
                             description="Knowledge-base file (.npz) of clean motion")
     method: EnumProperty(name="Method", items=METHOD_ITEMS, default="knn")
-    k: IntProperty(name="K", default=0, min=0, soft_max=4096,
-                   description="Neighbours per frame (0: automatic, min(1024, poses))")
+    k: IntProperty(name="K", default=0, min=0, soft_max=16384,
+                   description="Neighbours per frame (0: automatic, min(4096, poses))")
     max_gap: IntProperty(name="Max gap", default=0, min=0,
                          description="Leave gaps longer than this many frames unfilled "
                                      "(0: fill all)")

@@ -246,7 +246,7 @@ def build_parser(extra=None):
                    help="knn (default): the knowledge-base method; auto: per point knn or "
                         "spline, whichever refills copies of its gaps clearly better")
     p.add_argument("-K", dest="k", type=int,
-                   help="neighbours per frame (knn; default 1024, or the KB size if smaller)")
+                   help="neighbours per frame (knn; default 4096, or the KB size if smaller)")
     p.add_argument("--max-gap", type=int, metavar="FRAMES",
                    help="leave gaps longer than this unfilled")
     p.add_argument("--device", default="auto", choices=DEVICES,
@@ -268,7 +268,8 @@ def build_parser(extra=None):
                    help="only these settings, e.g. 'm=6,l=60' 'rate=0.2'")
     p.add_argument("--fps", type=float, default=60.0, help="evaluation frame rate (default 60)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("-K", dest="k", type=int, help="knn neighbours (default 1024)")
+    p.add_argument("-K", dest="k", type=int,
+                   help="knn neighbours (default 4096, or the KB size if smaller)")
     p.add_argument("--skip-frames", type=int, default=0, metavar="N",
                    help="drop N leading frames of every file (6 for Daz-friendly BVH)")
     p.add_argument("--exclude-kb", action="append", metavar="GLOB",

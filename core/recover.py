@@ -52,12 +52,14 @@ CHANGE_ROOT = 0.01
 CHANGE_ANGLE = np.deg2rad(1.0)
 
 
-#: the query-noise factors "auto" chooses from, and how many frames it checks
-NOISE_FACTORS = (0.0, 0.25, 1.0)
+#: the query-noise factors "auto" chooses from, how many frames it checks, and the factor used
+#: where no frame shows the points some gap hides (then nothing can be checked)
+NOISE_FACTORS = (0.0, 0.125, 0.25, 0.5, 1.0)
 CALIBRATION_FRAMES = 192
+UNCHECKED_FACTOR = 0.25
 
 #: neighbours per frame when KnnSettings.k is None
-DEFAULT_K = 1024
+DEFAULT_K = 4096
 #: subspace iteration of the local PCA: extra columns and power iterations
 OVERSAMPLE = 8
 POWER_ITERATIONS = 1
@@ -67,12 +69,17 @@ POWER_ITERATIONS = 1
 class KnnSettings:
     """Settings of the ``knn`` method (the paper's weights; see docs/METHOD_NOTES.md).
 
-    ``k`` None means 1024 neighbours, or the whole knowledge base when it is smaller: on our
-    knowledge bases (7k-100k poses) accuracy kept improving up to K = 1024 and beyond, unlike
-    the paper's K = 256 on the whole CMU database.
+    ``k`` None means 4096 neighbours, or the whole knowledge base when it is smaller: on our
+    knowledge bases (7k-100k poses) accuracy kept improving up to K = 2048-4096, unlike the
+    paper's K = 256 on the whole CMU database. What matters is how far the neighbourhood
+    reaches, not how many poses the model sees: each local model is fitted to a random
+    ``model_neighbours`` of the K (same accuracy within 2 %, a quarter of the cost at K = 4096;
+    docs/METHOD_NOTES.md).
     """
 
     k: int = None
+    #: the local PCA is fitted to a random sample of this many of the K neighbours (None: all)
+    model_neighbours: int = 1024
     w_r: float = 0.55
     w_in: float = 0.9
     w_l: float = 0.3
@@ -252,6 +259,10 @@ def _fit_models(index, queries, mask, settings, rng):
     Returns the :func:`_local_pca` arrays (means, comps, lams, noise) and the spread (q,).
     """
     idx, dist2 = index.search(queries, ~mask, settings.k, ordered=False)
+    sample = settings.model_neighbours
+    if sample and sample < idx.shape[1]:
+        # the same random places of each row, sorted first so every backend samples alike
+        idx = np.sort(idx, axis=1)[:, np.sort(rng.choice(idx.shape[1], sample, replace=False))]
     means, comps, lams, noise = _local_pca(index.gather(idx), settings, rng, index.backend)
     n = mask.shape[1]
     present = (~mask).sum(axis=1)
@@ -290,18 +301,25 @@ def _noise_factor(obs_norm, model, frames, index, settings, rng):
             rows.extend(rng.choice(candidates, take, replace=False))
             hidden.extend([pattern] * take)
     if not rows:
-        return 1.0
-    rows, hidden = np.array(rows), np.array(hidden)
+        return UNCHECKED_FACTOR
+    errors = _factor_errors(obs_norm, model, np.array(rows), np.array(hidden), index, settings,
+                            rng, NOISE_FACTORS)
+    return NOISE_FACTORS[int(np.argmin(errors))]
+
+
+def _factor_errors(obs_norm, model, rows, hidden, index, settings, rng, factors):
+    """Squared error of each noise factor's closed-form prediction of the ``hidden`` points
+    (one mask per row) of the frames ``rows``."""
     mask = model[rows] | hidden
     means, comps, lams, noise, spread = _fit_models(index, obs_norm[rows], mask, settings, rng)
     obs = np.nan_to_num(obs_norm[rows])
     errors = []
-    for factor in NOISE_FACTORS:
+    for factor in factors:
         level = np.maximum(noise, factor * spread)
         h = _closed_form(mask, obs, means, comps, lams, level, settings)
         pose = _poses(means, comps, h).reshape(obs.shape)
         errors.append(float(((pose - obs) ** 2)[hidden].sum()))
-    return NOISE_FACTORS[int(np.argmin(errors))]
+    return errors
 
 
 def pieces(n_frames, size, overlap):
@@ -383,7 +401,8 @@ def _fill_piece(motion, kb, settings, progress, should_cancel, report):
     elif settings.k > kb.size:
         raise GapFillError(f"K = {settings.k} is larger than the knowledge base ({kb.size} poses)")
     name_to = {nm: i for i, nm in enumerate(common)}
-    index = KBIndex(kb.poses[:, kb_cols], settings.device)
+    index = KBIndex(kb.poses if kb_cols == list(range(len(kb.names))) else kb.poses[:, kb_cols],
+                    settings.device)
     limbs = np.asarray([(name_to[kb.names[a]], name_to[kb.names[b]]) for a, b in kb.limbs
                         if kb.names[a] in name_to and kb.names[b] in name_to], dtype=np.int64)
     limbs = limbs.reshape(-1, 2)

@@ -36,10 +36,12 @@ class KBIndex:
             raise GapFillError(f"knowledge-base poses must be (n, points, 3), got {poses.shape}")
         self.poses = poses
         self.n, self.points = poses.shape[:2]
-        flat = poses.reshape(self.n, -1).astype(np.float32)
-        sq = (poses.astype(np.float64) ** 2).sum(axis=2).astype(np.float32)
+        flat = poses.reshape(self.n, -1).astype(np.float32, copy=False)
         # the matrix every query block multiplies: [k, |k_i|^2], transposed for a fast GEMM
-        self.backend = resolve(device).prepare(np.concatenate([flat, sq], axis=1).T)
+        rhs = np.empty((flat.shape[1] + self.points, self.n), np.float32)
+        rhs[:flat.shape[1]] = flat.T
+        rhs[flat.shape[1]:] = np.einsum("npc,npc->pn", poses, poses)
+        self.backend = resolve(device).prepare(rhs)
         self._flat = flat
         self._buffer = np.empty(0, np.float32)
 

@@ -82,7 +82,7 @@ def stage_fill(repeat, k=None, device="auto"):
         t = time.perf_counter()
         out = fill(query, "knn", kb=kb, settings=KnnSettings(k=k, device=device))
         times.append(time.perf_counter() - t)
-    return {"kb_size": kb.size, "frames": 2048, "fps": take.fps, "k": k or "default (1024)",
+    return {"kb_size": kb.size, "frames": 2048, "fps": take.fps, "k": k or "default (4096)",
             "device": device,
             "kb_build_s": build, "fill_median_s": statistics.median(times),
             "rmse_missing_mm": rmse_mm(out, take, miss)}
