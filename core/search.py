@@ -129,7 +129,7 @@ def smallest_columns(d, k):
     if n < 8 * k:
         return np.argpartition(d, k - 1, axis=1)[:, :k]
     # threshold from a strided sample: expected ~4k survivors per row
-    step = max(1, n // (64 * k // 4 + 1))
+    step = max(1, n // min(16 * k + 1, 4096))
     sample = d[:, ::step]
     rank = min(sample.shape[1] - 1, int(np.ceil(4 * k * sample.shape[1] / n)))
     tau = np.partition(sample, rank, axis=1)[:, rank]
