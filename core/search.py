@@ -128,10 +128,13 @@ def smallest_columns(d, k):
         return np.broadcast_to(np.arange(n), d.shape).copy()
     if n < 8 * k:
         return np.argpartition(d, k - 1, axis=1)[:, :k]
-    # threshold from a strided sample: expected ~4k survivors per row
+    # threshold from a strided sample: mu sample entries are expected below the k-th smallest;
+    # taking rank mu + 4 sqrt(mu) + 2 keeps at least k survivors but in rare rows (those fall
+    # back to a full partition), and few more than k when k is large
     step = max(1, n // min(16 * k + 1, 4096))
     sample = d[:, ::step]
-    rank = min(sample.shape[1] - 1, int(np.ceil(4 * k * sample.shape[1] / n)))
+    mu = k * sample.shape[1] / n
+    rank = min(sample.shape[1] - 1, int(np.ceil(mu + 4 * np.sqrt(mu) + 2)))
     tau = np.partition(sample, rank, axis=1)[:, rank]
     keep = d <= tau[:, None]
     counts = keep.sum(axis=1)
