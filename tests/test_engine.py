@@ -212,6 +212,30 @@ def test_unordered_search_returns_the_same_neighbour_sets(daz_kb):
     np.testing.assert_allclose(np.sort(d_unordered, axis=1), d_ordered, rtol=1e-3, atol=1e-5)
 
 
+def test_top_k_selection_is_exact_for_every_k(daz_kb):
+    """The sampled-threshold top-K (numpy backend) returns exactly the K smallest per row, for
+    small and large K: on real squared distances (many near-ties), on random rows wide enough for
+    the sampled path at K 4096, on rows of equal values (everything survives the threshold), and
+    on rows whose sampled columns hold their only small values (too few survive: the full
+    partition takes over)."""
+    from mocap_gapfill.core.search import smallest_columns
+
+    rng = np.random.default_rng(2)
+    flat = daz_kb.poses.reshape(daz_kb.size, -1)
+    queries = flat[rng.choice(daz_kb.size, 40, replace=False)]
+    real = ((queries[:, None, :] - flat[None]) ** 2).sum(axis=2).astype(np.float32)
+    wide = rng.standard_normal((6, 40000)).astype(np.float32)
+    equal = np.zeros((3, 40000), np.float32)
+    skewed = 2 + rng.random((3, 40000)).astype(np.float32)
+    skewed[:, ::40000 // 4096] = rng.random((3, 4445))  # the threshold's sample, and only it
+    for matrix, ks in ((real, (1, 7, 64, 256, 1024)), (wide, (64, 1024, 4096)),
+                       (equal, (64, 4096)), (skewed, (4800,))):
+        for k in ks:
+            got = np.take_along_axis(matrix, smallest_columns(matrix, k), axis=1)
+            np.testing.assert_array_equal(np.sort(got, axis=1),
+                                          np.sort(matrix, axis=1)[:, :k])
+
+
 def test_auto_takes_the_better_method_per_point(daz_kb, data_dir):
     """auto = per point the better of knn and spline on copies of the gaps: close to the better
     of the two on a slow take with a bone gap (spline wins) and on a jump turn (knn wins)."""
