@@ -84,7 +84,7 @@ class KnnSettings:
     w_in: float = 0.9
     w_l: float = 0.3
     w_s: float = 0.15
-    variance: float = 0.995
+    variance: float = 0.999
     max_components: int = 32
     smoothness: str = "acceleration"
     #: scales that make the terms unitless: limb length error (m), acceleration (m/s^2)
