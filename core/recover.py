@@ -302,24 +302,17 @@ def _noise_factor(obs_norm, model, frames, index, settings, rng):
             hidden.extend([pattern] * take)
     if not rows:
         return UNCHECKED_FACTOR
-    errors = _factor_errors(obs_norm, model, np.array(rows), np.array(hidden), index, settings,
-                            rng, NOISE_FACTORS)
-    return NOISE_FACTORS[int(np.argmin(errors))]
-
-
-def _factor_errors(obs_norm, model, rows, hidden, index, settings, rng, factors):
-    """Squared error of each noise factor's closed-form prediction of the ``hidden`` points
-    (one mask per row) of the frames ``rows``."""
+    rows, hidden = np.array(rows), np.array(hidden)
     mask = model[rows] | hidden
     means, comps, lams, noise, spread = _fit_models(index, obs_norm[rows], mask, settings, rng)
     obs = np.nan_to_num(obs_norm[rows])
     errors = []
-    for factor in factors:
+    for factor in NOISE_FACTORS:
         level = np.maximum(noise, factor * spread)
         h = _closed_form(mask, obs, means, comps, lams, level, settings)
         pose = _poses(means, comps, h).reshape(obs.shape)
         errors.append(float(((pose - obs) ** 2)[hidden].sum()))
-    return errors
+    return NOISE_FACTORS[int(np.argmin(errors))]
 
 
 def pieces(n_frames, size, overlap):
