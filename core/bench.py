@@ -187,7 +187,7 @@ def _model_and_fill(base, take, names, rng, quick, repeat, add):
     from .fill import fill
     from .kb import KnowledgeBase
     from .motion import Motion
-    from .recover import KnnSettings, _closed_form, _local_pca
+    from .recover import KnnSettings, _closed_form, _local_pca, _normal_equations
     from .search import KBIndex
 
     frames_list = (2048,) if quick else (512, 2048)
@@ -209,7 +209,8 @@ def _model_and_fill(base, take, names, rng, quick, repeat, add):
                     neighbours = poses.reshape(size, -1)[idx]
                     mean, comps, lams, noise = _local_pca(neighbours, settings, rng,
                                                           index.backend)
-                    _closed_form(~present, q, mean, comps, lams, noise, settings)
+                    _closed_form(_normal_equations(~present, q, mean, comps), lams, noise,
+                                 settings)
 
                 median, peak = timed(model, repeat)
                 add("model", index.backend.name, size, len(q), k, median, peak)

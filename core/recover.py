@@ -30,6 +30,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import minimize
+from scipy.sparse import csr_matrix
 
 from .baselines import fill_linear
 from .errors import GapFillError
@@ -116,29 +117,33 @@ def _local_pca(neighbours, settings, rng, backend):
     """Top principal components of each frame's neighbours (batched subspace iteration).
 
     neighbours: (t, k, d) float32, centred in place. Returns mean (t, d), components (t, d, r)
-    with the eigenvalues (t, r) of unused components set to 0, and the noise variance (t,): the
-    mean variance the used components leave out (probabilistic PCA); float64. The covariance and
-    the iteration are float32 like the poses (the eigenvalues that matter lie far above its
-    rounding), sums and the results float64.
+    and eigenvalues (t, r), both 0 where a component is not used, and the noise variance (t,):
+    the mean variance the used components leave out (probabilistic PCA); float64. The mean, the
+    covariance and the iteration are float32 like the poses (the eigenvalues that matter lie far
+    above its rounding), the small eigenproblem and the results float64.
     """
     t, k, d = neighbours.shape
-    mean = neighbours.mean(axis=1, dtype=np.float64)
+    # sums by a product (float32, like the poses: errors of a few um; 2x a float64 reduction)
+    mean = (np.ones((1, k), neighbours.dtype) @ neighbours)[:, 0].astype(np.float64) / k
     neighbours -= mean[:, None, :].astype(neighbours.dtype)
     cov = backend.gram(neighbours) / np.float32(max(1, k - 1))
     total = np.trace(cov, axis1=1, axis2=2, dtype=np.float64)
     r = min(settings.max_components, d, k - 1)
-    y = cov @ rng.standard_normal((d, min(d, r + OVERSAMPLE))).astype(cov.dtype)
+    start = rng.standard_normal((d, min(d, r + OVERSAMPLE))).astype(cov.dtype)
+    y = (cov.reshape(-1, d) @ start).reshape(t, d, -1)  # one product: the start is shared
     for _ in range(POWER_ITERATIONS):
         y = cov @ _orthonormal(y)
     basis = _orthonormal(y)  # (t, d, r+8)
-    small = basis.transpose(0, 2, 1) @ cov @ basis
-    lam, vec = np.linalg.eigh(small)
-    lam, vec = lam[:, ::-1][:, :r].astype(np.float64), vec[:, :, ::-1][:, :, :r]
-    comps = (basis @ vec).astype(np.float64)
+    small = basis.transpose(0, 2, 1) @ (cov @ basis)
+    lam, vec = np.linalg.eigh(small.astype(np.float64))  # float64: faster here, and exact
+    lam = lam[:, ::-1][:, :r]
+    comps = basis @ np.ascontiguousarray(vec[:, :, ::-1][:, :, :r], dtype=basis.dtype)
+    comps = comps.astype(np.float64)
     lam = np.clip(lam, 0, None)
     captured = np.cumsum(lam, axis=1) / np.maximum(total, 1e-30)[:, None]
     used = np.concatenate([np.ones((t, 1), bool), captured[:, :-1] < settings.variance], axis=1)
     lam = np.where(used, lam, 0.0)
+    comps *= (lam > 0)[:, None, :]
     left = np.maximum(total - lam.sum(axis=1), 0) / np.maximum(1, d - used.sum(axis=1))
     return mean, comps, lam, np.maximum(left, settings.noise_floor)
 
@@ -149,94 +154,169 @@ def _orthonormal(y):
 
 
 class _Problem:
-    """The clip-wide energy over the PCA coefficients of the modelled frames."""
+    """The clip-wide energy over the PCA coefficients ``h`` (m, r) of the modelled frames.
+
+    The prior and input terms are quadratic in each frame's ``h``: they are evaluated from the
+    per-frame normal equations (``h^T A h + 2 b^T h + c``, O(r^2) a frame). The limb and
+    smoothness terms see only the modelled points ("entries", E of them): their normalised
+    positions ``z`` come from the rows of the components for those points, and the limb vectors
+    and the smoothness residuals are affine in them (sparse matrices over the entries plus the
+    observed values' constant part).
+    """
 
     def __init__(self, frames, obs_norm, model_missing, mean, comps, lam, noise, root, angle,
                  limbs, lengths, fps, settings, world_obs):
         m, n = model_missing.shape
-        self.frames = frames  # modelled frame indices into the clip
+        s = self.s = settings
         # only the components some frame uses (they come first): the products cost less
         r = max(1, int((lam > 0).sum(axis=1).max()))
         comps, lam = np.ascontiguousarray(comps[:, :, :r]), lam[:, :r]
-        self.miss = model_missing  # (m, n) bool: points the model provides
-        self.miss3 = model_missing[..., None]
-        self.present3 = ~self.miss3
-        self.obs = np.nan_to_num(obs_norm)  # (m, n, 3) normalised observations, 0 where missing
-        self.mean, self.comps, self.noise = mean, comps, noise
-        self.lam = lam
-        self.used, self.inv_lam = _prior(lam)
-        self.rot = rotation_z(angle[frames])  # normalised -> world, (m, 3, 3)
-        self.rot_t = self.rot.transpose(0, 2, 1)
-        self.root = root[frames][:, None, :]
-        self.s = settings
-        self.lengths = lengths
-        # limbs with a modelled end; the signed incidence matrix (points, limbs) gathers their
-        # gradients onto the points
-        self.limbs = limbs
-        self.incidence_t = np.zeros((n, len(limbs)))
-        if len(limbs):
-            self.incidence_t[limbs[:, 0], np.arange(len(limbs))] = 1.0
-            self.incidence_t[limbs[:, 1], np.arange(len(limbs))] = -1.0
-            self.limb_active = self.miss[:, limbs[:, 0]] | self.miss[:, limbs[:, 1]]
-        self.world = world_obs.copy()  # the clip in world coordinates; modelled values go in
-        self.kernel = KERNELS[settings.smoothness]
-        taps = len(self.kernel)
+        self.mean, self.comps = mean, comps
+        obs = np.nan_to_num(obs_norm)
+        self.entries = entries = _Entries(model_missing)
+        self.sub_mean = entries.gather(mean)
+        self.sub_comps = entries.gather(comps)
+        gram, lin, const = _normal_equations(model_missing, obs, mean, comps, self.sub_comps)
+        scale = s.w_in / noise
+        self.lhs = _lhs(gram * scale[:, None, None], lam, s)
+        self.lin = lin * scale[:, None]
+        self.const = float((const * scale).sum())
+        rows, pts = entries.rows, entries.points
+        n_entries = len(rows)
+        entry_of = np.full((m, n), n_entries)  # n_entries: an observed point
+        entry_of[rows, pts] = np.arange(n_entries)
+        # limbs with a modelled end: vector = limb_const + limb_map @ z
+        self.limb_map = self.limb_const = self.limb_length = None
+        if len(limbs) and s.w_l:
+            fr, li = np.nonzero(model_missing[:, limbs[:, 0]] | model_missing[:, limbs[:, 1]])
+            ends = entry_of[fr[:, None], limbs[li]]  # (pairs, 2)
+            known = ends == n_entries
+            self.limb_const = (obs[fr, limbs[li, 0]] * known[:, :1]
+                               - obs[fr, limbs[li, 1]] * known[:, 1:])
+            self.limb_map = _incidence(ends, np.array([1.0, -1.0]), n_entries)
+            self.limb_length = lengths[li]
+        # smoothness: residual of window (t, p) = sum_j c_j X[t + j, p] over the windows that
+        # touch a modelled point and no point that is neither observed nor modelled (frames with
+        # too little present); world entries = rot z + root
+        self.rot = rotation_z(angle[frames])[rows]  # normalised -> world, (E, 3, 3)
+        self.root = root[frames][rows]
+        kernel = KERNELS[s.smoothness]
+        taps = len(kernel)
+        self.smooth_map = self.smooth_const = None
         span = len(world_obs) - taps + 1
-        scale = settings.accel_scale / fps ** (2 if settings.smoothness == "acceleration" else 1)
-        self.smooth_weight = settings.w_s / scale ** 2
-        # smoothness counts only windows that touch a modelled point
-        modelled = np.zeros(world_obs.shape[:2], bool)
-        modelled[frames] = self.miss
-        window = np.zeros((max(span, 0), n), bool)
-        for j in range(taps):
-            window |= modelled[j:j + span]
-        self.window3 = window[..., None]
-        self.span = span
+        if s.w_s and span > 0:
+            world_entry = np.full(world_obs.shape[:2], n_entries)
+            world_entry[frames[rows], pts] = np.arange(n_entries)
+            modelled = world_entry < n_entries
+            unknown = np.isnan(world_obs[..., 0]) & ~modelled
+            window = np.zeros((span, n), bool)
+            blocked = np.zeros((span, n), bool)
+            for j in range(taps):
+                window |= modelled[j:j + span]
+                blocked |= unknown[j:j + span]
+            wt, wp = np.nonzero(window & ~blocked)
+            ends = np.stack([world_entry[wt + j, wp] for j in range(taps)], axis=1)
+            self.smooth_const = sum(c * np.nan_to_num(world_obs[wt + j, wp])
+                                    * (ends[:, j:j + 1] == n_entries) for j, c in enumerate(kernel))
+            self.smooth_map = _incidence(ends, kernel, n_entries)
+            scale = s.accel_scale / fps ** (2 if s.smoothness == "acceleration" else 1)
+            self.smooth_weight = s.w_s / scale ** 2
 
     def poses(self, h):
         return _poses(self.mean, self.comps, h)
 
     def energy(self, flat):
         s = self.s
-        m, n = self.miss.shape
+        m = len(self.lhs)
         h = flat.reshape(m, -1)
-        pose = self.poses(h).reshape(m, n, 3)
-        # retrieval prior
-        e = s.w_r * (h * h * self.inv_lam).sum()
-        grad_h = 2 * s.w_r * h * self.inv_lam
-        # input term over present points
-        resid = (pose - self.obs) * self.present3
-        scale = s.w_in / self.noise[:, None, None]
-        e += (resid * resid * scale).sum()
-        grad_pose = 2 * resid * scale
-        # the modelled pose where the model provides points, observations elsewhere
-        full = np.where(self.miss3, pose, self.obs)
-        if len(self.limbs) and s.w_l:
-            vec = full[:, self.limbs[:, 0]] - full[:, self.limbs[:, 1]]
-            length = np.sqrt((vec * vec).sum(axis=2))
-            err = np.where(self.limb_active, length - self.lengths, 0.0) / s.limb_scale
-            e += s.w_l * (err * err).sum()
+        # retrieval prior + input term
+        ah = (self.lhs @ h[..., None])[..., 0]
+        e = float((h * (ah + 2 * self.lin)).sum()) + self.const
+        grad_h = 2 * (ah + self.lin)
+        # the modelled points
+        z = self.entries.pick(self.sub_mean + (self.sub_comps @ h[..., None])[..., 0])
+        grad_z = np.zeros_like(z)
+        if self.limb_map is not None:
+            vec = self.limb_const + self.limb_map @ z
+            length = np.sqrt((vec * vec).sum(axis=1))
+            err = (length - self.limb_length) / s.limb_scale
+            e += s.w_l * float((err * err).sum())
             g = (2 * s.w_l / s.limb_scale) * err / np.maximum(length, 1e-9)
-            grad_pose += (self.incidence_t @ (g[..., None] * vec)) * self.miss3
-        if s.w_s and self.span > 0:
-            world = self.world
-            world[self.frames] = np.where(self.miss3, full @ self.rot_t + self.root,
-                                          world[self.frames])
-            res = sum(c * world[j:j + self.span] for j, c in enumerate(self.kernel))
-            res *= self.window3
-            e += self.smooth_weight * (res * res).sum()
-            gworld = np.zeros_like(world)
-            for j, c in enumerate(self.kernel):
-                gworld[j:j + self.span] += (2 * self.smooth_weight * c) * res
-            grad_pose += (gworld[self.frames] @ self.rot) * self.miss3
-        grad_h += (grad_pose.reshape(m, 1, -1) @ self.comps)[:, 0]
-        grad_h *= self.used
+            grad_z += self.limb_map.T @ (g[:, None] * vec)
+        if self.smooth_map is not None:
+            world = np.einsum("eij,ej->ei", self.rot, z) + self.root
+            res = self.smooth_const + self.smooth_map @ world
+            e += self.smooth_weight * float((res * res).sum())
+            grad_world = self.smooth_map.T @ ((2 * self.smooth_weight) * res)
+            grad_z += np.einsum("eji,ej->ei", self.rot, grad_world)
+        grad_h += (self.entries.spread(grad_z)[:, None, :] @ self.sub_comps)[:, 0]
         return e, grad_h.ravel()
 
     def closed_form(self):
         """Per-frame minimiser of the prior and input terms alone: (m, r)."""
-        return _closed_form(self.miss, self.obs, self.mean, self.comps, self.lam, self.noise,
-                            self.s)
+        return np.linalg.solve(self.lhs, -self.lin[..., None])[..., 0]
+
+
+class _Entries:
+    """The points a model provides ("entries"): (frame row, point) pairs of a (m, n) mask in
+    row order, and each row's entries padded to the most any row has (``width``)."""
+
+    def __init__(self, miss):
+        self.rows, self.points = np.nonzero(miss)
+        m, n = miss.shape
+        slot = np.arange(len(self.rows)) - np.searchsorted(self.rows, self.rows)
+        self.width = int(slot.max()) + 1 if len(slot) else 1
+        self.flat = self.rows * self.width + slot  # places in the padded (m * width) rows
+        self.shape = (m, n)
+
+    def gather(self, flat):
+        """(m, 3n, ...) per-coordinate values -> (m, 3 width, ...), zero padded."""
+        m, n = self.shape
+        out = np.zeros((m * self.width, 3) + flat.shape[2:])
+        out[self.flat] = flat.reshape((m, n, 3) + flat.shape[2:])[self.rows, self.points]
+        return out.reshape((m, 3 * self.width) + flat.shape[2:])
+
+    def pick(self, padded):
+        """(m, 3 width) padded values -> (E, 3) of the entries."""
+        return padded.reshape(-1, 3)[self.flat]
+
+    def spread(self, values):
+        """(E, 3) -> (m, 3 width), the inverse of :meth:`pick` (zeros in the padding)."""
+        out = np.zeros((self.shape[0] * self.width, 3))
+        out[self.flat] = values
+        return out.reshape(self.shape[0], -1)
+
+
+def _incidence(ends, coefficients, n_entries):
+    """Sparse (rows, n_entries) matrix with ``coefficients[j]`` at (i, ends[i, j]) wherever
+    ``ends[i, j]`` is an entry (< n_entries)."""
+    rows = np.repeat(np.arange(len(ends)), ends.shape[1])
+    cols = ends.ravel()
+    vals = np.tile(coefficients, len(ends))
+    keep = cols < n_entries
+    return csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(len(ends), n_entries))
+
+
+def _normal_equations(miss, obs, mean, comps, sub_comps=None):
+    """Per frame, the input term's ``|P (mean + W h - obs)|^2 = h^T G h + 2 g^T h + c`` over the
+    points the model does not provide (P): G (m, r, r), g (m, r), c (m,). ``sub_comps``: the rows
+    of ``comps`` for the points it provides (:meth:`_Entries.gather`), when already at hand."""
+    if sub_comps is None:
+        sub_comps = _Entries(miss).gather(comps)
+    # W^T P W = W^T W - (missing rows)^T (missing rows): no masked copy of the components
+    gram = comps.transpose(0, 2, 1) @ comps - sub_comps.transpose(0, 2, 1) @ sub_comps
+    x = (mean - obs.reshape(len(obs), -1)) * np.repeat(~miss, 3, axis=1)
+    return gram, (x[:, None, :] @ comps)[:, 0], (x * x).sum(axis=1)
+
+
+def _lhs(gram, lam, settings):
+    """The scaled input Gram matrices plus the retrieval prior on the diagonal (1 for unused
+    components, whose columns are 0: they stay 0)."""
+    used, inv_lam = _prior(lam)
+    diag = np.where(used, settings.w_r * inv_lam, 1.0)
+    out = gram.copy()
+    out[:, np.arange(lam.shape[1]), np.arange(lam.shape[1])] += diag
+    return out
 
 
 def _prior(lam):
@@ -270,16 +350,13 @@ def _fit_models(index, queries, mask, settings, rng):
     return means, comps, lams, noise, spread
 
 
-def _closed_form(miss, obs, mean, comps, lam, noise, settings):
-    """Coefficients (m, r) minimising the retrieval prior + input terms, frame by frame."""
-    used, inv_lam = _prior(lam)
-    present = np.repeat(~miss, 3, axis=1).astype(float)
-    wo = comps * present[..., None]
-    lhs = wo.transpose(0, 2, 1) @ wo * (settings.w_in / noise)[:, None, None]
-    lhs += settings.w_r * np.eye(lhs.shape[1]) * np.where(used, inv_lam, 1e12)[:, None, :]
-    x = obs.reshape(len(obs), -1) - mean
-    rhs = ((x * present)[:, None, :] @ wo)[:, 0] * (settings.w_in / noise)[:, None]
-    return np.linalg.solve(lhs, rhs[..., None])[..., 0] * used
+def _closed_form(normal, lam, noise, settings):
+    """Coefficients (m, r) minimising the retrieval prior + input terms frame by frame, from
+    :func:`_normal_equations`' (G, g, c) and the model noise (m,)."""
+    gram, lin, _ = normal
+    scale = settings.w_in / noise
+    lhs = _lhs(gram * scale[:, None, None], lam, settings)
+    return np.linalg.solve(lhs, -(lin * scale[:, None])[..., None])[..., 0]
 
 
 def _noise_factor(obs_norm, model, frames, index, settings, rng):
@@ -306,10 +383,10 @@ def _noise_factor(obs_norm, model, frames, index, settings, rng):
     mask = model[rows] | hidden
     means, comps, lams, noise, spread = _fit_models(index, obs_norm[rows], mask, settings, rng)
     obs = np.nan_to_num(obs_norm[rows])
+    normal = _normal_equations(mask, obs, means, comps)
     errors = []
     for factor in NOISE_FACTORS:
-        level = np.maximum(noise, factor * spread)
-        h = _closed_form(mask, obs, means, comps, lams, level, settings)
+        h = _closed_form(normal, lams, np.maximum(noise, factor * spread), settings)
         pose = _poses(means, comps, h).reshape(obs.shape)
         errors.append(float(((pose - obs) ** 2)[hidden].sum()))
     return NOISE_FACTORS[int(np.argmin(errors))]
@@ -481,7 +558,7 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
                            if settings.query_noise == "auto" else float(settings.query_noise))
     level = np.maximum(noise, cache["factor"] * spread)
     problem = _Problem(frames, obs_norm[frames], model[frames], means, comps, lams, level, root,
-                       angle, limbs, lengths, fps, settings, np.nan_to_num(pos))
+                       angle, limbs, lengths, fps, settings, pos)
     h0 = problem.closed_form()
     if settings.max_iterations > 0 and (settings.w_s or settings.w_l):
         def fun(x):
@@ -524,14 +601,15 @@ def _model_sources(frames, model, fps, model_fps):
 def _clip_lengths(pos, limbs, kb_poses):
     """Median length of each limb over the frames where both ends are present; the knowledge
     base's median where the clip never shows both ends."""
-    if not len(limbs):
-        return np.zeros(0)
     a, b = limbs[:, 0], limbs[:, 1]
     seen = np.linalg.norm(pos[:, a] - pos[:, b], axis=2)
-    clip = np.array([np.median(c[np.isfinite(c)]) if np.isfinite(c).any() else np.nan
-                     for c in seen.T])
-    known = np.median(np.linalg.norm(kb_poses[:, a] - kb_poses[:, b], axis=2), axis=0)
-    return np.where(np.isfinite(clip), clip, known)
+    lengths = np.array([np.median(c[np.isfinite(c)]) if np.isfinite(c).any() else np.nan
+                        for c in seen.T]).reshape(-1)
+    unseen = np.flatnonzero(np.isnan(lengths))
+    if len(unseen):
+        lengths[unseen] = np.median(np.linalg.norm(kb_poses[:, a[unseen]] - kb_poses[:, b[unseen]],
+                                                   axis=2), axis=0)
+    return lengths
 
 
 def _blend_into_gaps(pos, pred, missing, model):
