@@ -14,7 +14,9 @@ For every frame that has missing points (METHOD.md, steps 3-6):
    ``+ w_s sum_missing |sum_j c_j X_{t+j}|^2 / s_s^2``      smoothness (world coordinates)
 
    first in closed form per frame without the last two terms, then refined jointly over the
-   clip with L-BFGS (one batched energy and gradient, no loop over frames).
+   clip with L-BFGS (one batched energy and gradient, no loop over frames; the first two terms
+   come from each frame's normal equations, the last two from sparse maps over the modelled
+   points only, see :class:`_Problem`).
 
 Beyond the paper:
 - the model is also evaluated one frame outside each gap (the point is hidden there), and the
@@ -23,7 +25,8 @@ Beyond the paper:
 - smoothness penalises acceleration by default (the paper's term, ``smoothness="paper"``, pulls
   each frame towards the previous ones and lags on fast motion);
 - frames with fewer than ``min_present`` points present are not modelled: their prediction is
-  interpolated in time from the model trajectory around them, then blended like any other.
+  interpolated in time from the model trajectory around them, then blended like any other; the
+  smoothness term skips the windows that reach into their missing points.
 """
 
 from dataclasses import dataclass, replace
@@ -194,6 +197,7 @@ class _Problem:
             self.limb_const = (obs[fr, limbs[li, 0]] * known[:, :1]
                                - obs[fr, limbs[li, 1]] * known[:, 1:])
             self.limb_map = _incidence(ends, np.array([1.0, -1.0]), n_entries)
+            self.limb_map_t = self.limb_map.T.tocsr()
             self.limb_length = lengths[li]
         # smoothness: residual of window (t, p) = sum_j c_j X[t + j, p] over the windows that
         # touch a modelled point and no point that is neither observed nor modelled (frames with
@@ -219,6 +223,7 @@ class _Problem:
             self.smooth_const = sum(c * np.nan_to_num(world_obs[wt + j, wp])
                                     * (ends[:, j:j + 1] == n_entries) for j, c in enumerate(kernel))
             self.smooth_map = _incidence(ends, kernel, n_entries)
+            self.smooth_map_t = self.smooth_map.T.tocsr()
             scale = s.accel_scale / fps ** (2 if s.smoothness == "acceleration" else 1)
             self.smooth_weight = s.w_s / scale ** 2
 
@@ -242,12 +247,12 @@ class _Problem:
             err = (length - self.limb_length) / s.limb_scale
             e += s.w_l * float((err * err).sum())
             g = (2 * s.w_l / s.limb_scale) * err / np.maximum(length, 1e-9)
-            grad_z += self.limb_map.T @ (g[:, None] * vec)
+            grad_z += self.limb_map_t @ (g[:, None] * vec)
         if self.smooth_map is not None:
             world = np.einsum("eij,ej->ei", self.rot, z) + self.root
             res = self.smooth_const + self.smooth_map @ world
             e += self.smooth_weight * float((res * res).sum())
-            grad_world = self.smooth_map.T @ ((2 * self.smooth_weight) * res)
+            grad_world = self.smooth_map_t @ ((2 * self.smooth_weight) * res)
             grad_z += np.einsum("eji,ej->ei", self.rot, grad_world)
         grad_h += (self.entries.spread(grad_z)[:, None, :] @ self.sub_comps)[:, 0]
         return e, grad_h.ravel()
