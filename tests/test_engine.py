@@ -311,11 +311,12 @@ def test_local_models_fitted_to_a_sample_of_a_wide_neighbourhood(daz_kb, walk):
     assert abs(errors[0] - errors[1]) < 0.05 * errors[1], errors
 
 
-def test_energy_and_gradient_match_the_terms_written_out(daz_kb, walk, monkeypatch):
+@pytest.mark.parametrize("smoothness", ["acceleration", "paper"])
+def test_energy_and_gradient_match_the_terms_written_out(daz_kb, walk, monkeypatch, smoothness):
     """The fill's energy (evaluated from per-frame normal equations and sparse maps over the
     modelled points) equals the four terms of docs/METHOD.md written out densely, and its
     gradient equals central differences: on a real clip with gaps, frames with nothing present
-    and a gap at the clip end."""
+    and a gap at the clip end, with either smoothness kernel."""
     from mocap_gapfill.core import recover
     from mocap_gapfill.core.normalize import rotation_z
 
@@ -331,7 +332,7 @@ def test_energy_and_gradient_match_the_terms_written_out(daz_kb, walk, monkeypat
     miss[200:203] = True
     miss[-30:, walk.names.index("rHand")] = True
     fill(with_gaps(walk, miss), "knn", kb=kb_without(daz_kb, "07"),
-         settings=KnnSettings(k=256, device="numpy"))
+         settings=KnnSettings(k=256, device="numpy", smoothness=smoothness))
     problem, (frames, obs_norm, model, mean, comps, lam, noise, root, angle, limbs, lengths, fps,
               s, world_obs) = made[0]
 
@@ -352,9 +353,16 @@ def test_energy_and_gradient_match_the_terms_written_out(daz_kb, walk, monkeypat
                                  + root[frames][:, None], world[frames])
         modelled = np.zeros(world.shape[:2], bool)
         modelled[frames] = model
-        acc = world[:-2] - 2 * world[1:-1] + world[2:]
-        window = (modelled[:-2] | modelled[1:-1] | modelled[2:]) & np.isfinite(acc[..., 0])
-        return e + s.w_s / (s.accel_scale / fps ** 2) ** 2 * (acc[window] ** 2).sum()
+        if smoothness == "acceleration":  # X_t - 2 X_t+1 + X_t+2
+            taps, res, scale = 3, world[:-2] - 2 * world[1:-1] + world[2:], s.accel_scale / fps ** 2
+        else:  # X_t+3 - (3 X_t+2 + 2 X_t+1 + X_t) / 6
+            taps = 4
+            res = world[3:] - (3 * world[2:-1] + 2 * world[1:-2] + world[:-3]) / 6
+            scale = s.accel_scale / fps
+        span = len(world) - taps + 1
+        window = np.any([modelled[j:j + span] for j in range(taps)], axis=0)
+        window &= np.isfinite(res[..., 0])
+        return e + s.w_s / scale ** 2 * (res[window] ** 2).sum()
 
     h0 = problem.closed_form()
     rng = np.random.default_rng(0)
