@@ -1,10 +1,42 @@
 """``python -m mocap_gapfill`` and the ``mocap-gapfill`` command: the core's command line plus
 the Blender commands of the add-on (which import bpy only when run)."""
 
+import os
 import sys
+
+#: OpenBLAS kernels by the x86 features they need, best first
+BLAS_KERNELS = (("SkylakeX", {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl"}),
+                ("Haswell", {"avx2", "fma"}))
+
+
+def choose_blas_kernel(environ=os.environ, cpuinfo="/proc/cpuinfo"):
+    """Name OpenBLAS's kernel after the CPU's features (``OPENBLAS_CORETYPE``), before numpy
+    loads it; returns the kernel set, or None where nothing was changed.
+
+    numpy 1.26 bundles OpenBLAS 0.3.23, which picks its kernel by CPU model and falls back to
+    an old, slow one on models it does not know: on our Xeon VM (family 6, model 207) float32
+    GEMM ran at 34 GFLOP/s instead of 142-160 (docs/BENCHMARKS.md). The kernels named here are
+    the ones OpenBLAS gives the CPUs it knows with those features. Nothing is changed when the
+    variable is set, numpy is already loaded (inside Blender), or the features are unknown
+    (no /proc/cpuinfo, not x86).
+    """
+    if "OPENBLAS_CORETYPE" in environ or "numpy" in sys.modules:
+        return None
+    try:
+        with open(cpuinfo, encoding="ascii", errors="replace") as f:
+            flags = next((set(line.split(":", 1)[1].split()) for line in f
+                          if line.startswith("flags")), set())
+    except OSError:
+        return None
+    for kernel, needs in BLAS_KERNELS:
+        if needs <= flags:
+            environ["OPENBLAS_CORETYPE"] = kernel
+            return kernel
+    return None
 
 
 def main(argv=None):
+    choose_blas_kernel()
     from .addon.commands import add_commands
     from .addon.bpy_exit import leave_if_bpy_would_crash
     from .core.cli import main as core_main

@@ -38,7 +38,7 @@ HIDDEN = 6
 def machine():
     info = {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
             "threads": os.environ.get("OMP_NUM_THREADS"), "python": platform.python_version(),
-            "numpy": np.__version__}
+            "numpy": np.__version__, "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE")}
     try:
         import torch
 

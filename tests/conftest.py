@@ -9,10 +9,13 @@ from pathlib import Path
 
 import pytest
 
+from mocap_gapfill.__main__ import choose_blas_kernel
+
 ROOT = Path(__file__).resolve().parent.parent
 DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA", ROOT.parent / "shared" / "data"))
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+choose_blas_kernel()  # as the command line does (before anything loads numpy)
 
 
 @pytest.fixture(scope="session")

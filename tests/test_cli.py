@@ -165,3 +165,31 @@ def test_demo_is_the_main_job(tmp_path):
     assert set(blender) == {"Walker", "WalkerMarkers"}
     assert float(blender["Walker"]) < float(skeleton["linear"]) / 5
     assert float(blender["WalkerMarkers"]) < float(markers["linear"]) / 5
+
+
+def test_blas_kernel_follows_the_cpu_features(tmp_path):
+    """The command line names OpenBLAS's kernel from /proc/cpuinfo's flags before numpy loads
+    (numpy 1.26's OpenBLAS falls back to a 4x slower kernel on CPUs it does not know), and
+    leaves everything alone when the variable is set, numpy is loaded or the flags are unknown."""
+    cases = {"avx512": "fpu sse2 avx avx2 fma avx512f avx512cd avx512bw avx512dq avx512vl",
+             "avx512f only": "fpu sse2 avx avx2 fma avx512f",
+             "old": "fpu sse2 sse4_2"}
+    for name, flags in cases.items():
+        (tmp_path / name).write_text(f"processor\t: 0\nvendor_id\t: x\nflags\t\t: {flags}\n\n")
+    code = (
+        "import json, sys\n"
+        "from mocap_gapfill.__main__ import choose_blas_kernel\n"
+        f"d = {str(tmp_path)!r}\n"
+        "out = {n: choose_blas_kernel({}, d + '/' + n) for n in sys.argv[1:]}\n"
+        "out['missing file'] = choose_blas_kernel({}, d + '/none')\n"
+        "env = {'OPENBLAS_CORETYPE': 'Zen'}\n"
+        "out['already set'] = [choose_blas_kernel(env, d + '/avx512'), env['OPENBLAS_CORETYPE']]\n"
+        "import numpy\n"
+        "out['numpy loaded'] = choose_blas_kernel({}, d + '/avx512')\n"
+        "print(json.dumps(out))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code, *cases], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout) == {
+        "avx512": "SkylakeX", "avx512f only": "Haswell", "old": None, "missing file": None,
+        "already set": [None, "Zen"], "numpy loaded": None}

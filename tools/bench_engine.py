@@ -22,6 +22,8 @@ import sys
 import time
 from pathlib import Path
 
+from mocap_gapfill.__main__ import choose_blas_kernel
+
 DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA", Path(__file__).resolve().parents[2] / "shared/data"))
 DAZ = DATA / "cmu/bvh/daz_friendly"
 
@@ -98,6 +100,7 @@ def run_stage(name, repeat, device="auto"):
 
 
 def main():
+    choose_blas_kernel()  # as the command line does; the stages inherit it
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--stage", choices=["search", "fill", "fill256"])
@@ -113,7 +116,8 @@ def main():
         print(json.dumps(result))
         return
     machine = {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-               "threads": os.environ.get("OMP_NUM_THREADS"), "python": platform.python_version()}
+               "threads": os.environ.get("OMP_NUM_THREADS"), "python": platform.python_version(),
+               "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE")}
     search = None
     if not args.skip_search:
         search = run_stage("search", args.repeat)
