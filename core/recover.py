@@ -210,7 +210,7 @@ class _Problem:
         span = len(world_obs) - taps + 1
         if s.w_s and span > 0:
             world_entry = np.full(world_obs.shape[:2], n_entries)
-            world_entry[frames[rows], pts] = np.arange(n_entries)
+            world_entry[frames] = entry_of
             modelled = world_entry < n_entries
             unknown = np.isnan(world_obs[..., 0]) & ~modelled
             window = np.zeros((span, n), bool)
@@ -317,17 +317,11 @@ def _normal_equations(miss, obs, mean, comps, sub_comps=None):
 def _lhs(gram, lam, settings):
     """The scaled input Gram matrices plus the retrieval prior on the diagonal (1 for unused
     components, whose columns are 0: they stay 0)."""
-    used, inv_lam = _prior(lam)
-    diag = np.where(used, settings.w_r * inv_lam, 1.0)
+    used = lam > 0
+    diag = np.where(used, settings.w_r / np.where(used, lam, 1.0), 1.0)
     out = gram.copy()
     out[:, np.arange(lam.shape[1]), np.arange(lam.shape[1])] += diag
     return out
-
-
-def _prior(lam):
-    """Which components a local model uses (eigenvalue > 0) and their inverse eigenvalues."""
-    used = lam > 0
-    return used, np.where(used, 1.0 / np.where(used, lam, 1.0), 0.0)
 
 
 def _poses(mean, comps, h):
