@@ -59,6 +59,9 @@ def run(args, report=print):
             report(f"{100 * fraction:3.0f} % {message}")
 
         written = gaps.apply_fill(context, plans, work(progress, lambda: False))
+        for plan in plans:
+            for message in plan.messages:
+                report(f"{plan.owner}: {message}")
         report(f"filled {written} samples")
     bpy.ops.wm.save_as_mainfile(filepath=str(out), copy=True)
     report(f"saved {out}")

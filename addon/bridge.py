@@ -22,10 +22,12 @@ import numpy as np
 
 from ..core.motion import UNIT_SCALES, Motion, rigid_marker_pairs, skeleton_limbs, units_for_height
 from ..core.posing import bones_to_blame, points_missing, solve_pose, tail_handles
+from ..core.rig import Rig
 from . import compat
 
 MARKER_SET = "mocap_gapfill_marker_set"  # custom property on the parent empty of a marker set
 TAILS = "mocap_gapfill_tails"  # custom property of armatures whose joints are bone tails
+LINEAR = 1  # Keyframe.interpolation "LINEAR" as foreach_set takes it
 ROTATION_PATHS = {"QUATERNION": ("rotation_quaternion", 4),
                   "AXIS_ANGLE": ("rotation_axis_angle", 4)}  # others: Euler
 
@@ -46,12 +48,16 @@ def set_keys(curves, data_path, index, frames, values, group, key_type="GENERATE
     old_frames, old_values = curve_keys(curve)
     keep = ~np.isin(np.round(old_frames), np.round(frames))
     old_types = np.empty(len(old_frames), dtype=np.int32)
+    old_modes = np.empty(len(old_frames), dtype=np.int32)
     if len(old_frames):
         curve.keyframe_points.foreach_get("type", old_types)
+        curve.keyframe_points.foreach_get("interpolation", old_modes)
     frames_all = np.concatenate([old_frames[keep], frames])
     values_all = np.concatenate([old_values[keep], values])
     types = np.concatenate([old_types[keep],
                             np.full(len(frames), compat.KEY_TYPES[key_type], dtype=np.int32)])
+    # kept keys keep their interpolation; new ones are linear (what a mocap importer keys)
+    modes = np.concatenate([old_modes[keep], np.full(len(frames), LINEAR, dtype=np.int32)])
     order = np.argsort(frames_all, kind="stable")
     curve.keyframe_points.clear()
     curve.keyframe_points.add(len(order))
@@ -59,7 +65,7 @@ def set_keys(curves, data_path, index, frames, values, group, key_type="GENERATE
     co[0::2], co[1::2] = frames_all[order], values_all[order]
     curve.keyframe_points.foreach_set("co", co)
     curve.keyframe_points.foreach_set("type", types[order])
-    curve.keyframe_points.foreach_set("interpolation", np.zeros(len(order), dtype=np.int32))
+    curve.keyframe_points.foreach_set("interpolation", modes[order])
     curve.update()
     return curve
 
@@ -203,8 +209,13 @@ def read_armature(obj, scene):
     tails = bool(obj.get(TAILS))
     heads = np.empty((frames, n, 3))
     basis = np.empty((frames, n, 4, 4))
+    channels = np.zeros((frames, n, 4))
+    location = np.empty((frames, n, 3))
+    modes = tuple(b.rotation_mode for b in bones)
+    quaternion = np.array([m in ROTATION_PATHS for m in modes])  # 4 values: w x y z / angle x y z
     keep = scene.frame_current
     buf = np.empty(n * 3, dtype=np.float32)
+    buf4 = np.empty(n * 4, dtype=np.float32)
     ends = np.array([tails and p >= 0 for p in parents])
     for f in range(frames):
         scene.frame_set(first + f)
@@ -214,7 +225,18 @@ def read_armature(obj, scene):
             bones.foreach_get("tail", buf)
             heads[f, ends] = buf.reshape(n, 3)[ends]
         basis[f] = _matrices(bones, "matrix_basis", n)
+        bones.foreach_get("location", buf)
+        location[f] = buf.reshape(n, 3)
+        bones.foreach_get("rotation_euler", buf)
+        channels[f, :, :3] = buf.reshape(n, 3)
+        for mode, path in (("QUATERNION", "rotation_quaternion"),
+                           ("AXIS_ANGLE", "rotation_axis_angle")):
+            if mode in modes:
+                bones.foreach_get(path, buf4)
+                rows = np.array([m == mode for m in modes])
+                channels[f, rows] = buf4.reshape(n, 4)[rows]
     scene.frame_set(keep)
+    channels[:, ~quaternion, 3] = 0.0
     curves = compat.fcurves(obj)
     keyed = np.zeros((frames, n), dtype=bool)
     moves = np.zeros(n, dtype=bool)
@@ -234,11 +256,12 @@ def read_armature(obj, scene):
     height = float(np.ptp(rest_heads[:, 2])) if n > 1 else 0.0
     lengths = np.empty(n, dtype=np.float32)
     obj.data.bones.foreach_get("length", lengths)
+    rig = Rig(names, parents, rest, modes, lengths.astype(np.float64) if tails else None)
     return Take(obj.name, "armature", first, names, pos, keyed, scene_fps(scene),
                 to_metres(obj.mocap_gapfill.units, height), world, parents,
-                extra={"rest": rest, "basis": basis, "moves": moves,
-                       "modes": tuple(b.rotation_mode for b in bones),
-                       "handles": tail_handles(lengths, parents) if tails else None})
+                extra={"rest": rest, "basis": basis, "moves": moves, "modes": modes,
+                       "handles": tail_handles(lengths, parents) if tails else None,
+                       "rig": rig, "channels": channels, "location": location})
 
 
 def read_take(obj, scene):

@@ -124,11 +124,14 @@ def remove_keys(obj, gaps):
             if curve.data_path.startswith(tag):
                 frames, values = bridge.curve_keys(curve)
                 keep = (frames < first) | (frames > last)
+                modes = np.empty(len(frames), dtype=np.int32)
+                curve.keyframe_points.foreach_get("interpolation", modes)
                 curve.keyframe_points.clear()
                 curve.keyframe_points.add(int(keep.sum()))
                 co = np.empty(2 * int(keep.sum()), dtype=np.float32)
                 co[0::2], co[1::2] = frames[keep], values[keep]
                 curve.keyframe_points.foreach_set("co", co)
+                curve.keyframe_points.foreach_set("interpolation", modes[keep])
                 curve.update()
 
 

@@ -5,7 +5,7 @@ which only sees arrays.
 """
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -127,11 +127,16 @@ def gap_mask(gaps, points, first, frames):
     return mask
 
 
+def take_gaps(owner, take):
+    """(frames, points) samples under the take's listed gaps or unkeyed: markers without a
+    good key, or bones without good keys (their rotation, and a moving bone's location)."""
+    return gap_mask(owner.mocap_gapfill.gaps, take.points, take.first,
+                    take.positions.shape[0]) | bridge.unkeyed(take)
+
+
 def take_missing(owner, take):
     """Point samples a take does not know: those under its listed gaps and its unkeyed ones."""
-    every = gap_mask(owner.mocap_gapfill.gaps, take.points, take.first,
-                     take.positions.shape[0]) | bridge.unkeyed(take)
-    return bridge.missing_points(take, every)
+    return bridge.missing_points(take, take_gaps(owner, take))
 
 
 def load_kb_cached(path):
@@ -164,13 +169,20 @@ class FillPlan:
     write: np.ndarray  # (frames, points) samples (markers) or bone frames (armature) to write
     missing: np.ndarray  # (frames, points) point samples unknown to the core
     gap_ids: list  # indices into the owner's gap list that this fill covers
+    bone_gaps: np.ndarray = None  # (frames, bones) armatures: frames without good keys
+    messages: list = field(default_factory=list)  # what the fill had to say
 
 
 def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, kb=None,
               device="auto"):
     """Read the takes and return ``(plans, work)``: ``work(progress, should_cancel)`` fills them
-    on plain arrays and returns per plan the filled positions (and, for armatures, the solved
-    basis matrices)."""
+    on plain arrays and returns per plan the filled positions (None for armatures filled in
+    rotation space) and, for armatures, the solved basis matrices.
+
+    Armatures with ``knn`` or ``auto`` are filled in the space of their gaps
+    (:func:`~..core.bonefill.fill_bones`, method ``auto``): only the gapped bones' rotations
+    change, and only on gaps where the knowledge base refills copies of the gap better than
+    Blender's own interpolation; other methods fill joint positions and solve the bones."""
     from ..core.fill import NEEDS_KB, fill
     from ..core.recover import KnnSettings
 
@@ -192,10 +204,11 @@ def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, 
             continue
         chosen = [settings.gaps[i] for i in ids]
         write = gap_mask(chosen, take.points, take.first, frames)
-        missing = take_missing(owner, take)
+        every = take_gaps(owner, take)
+        missing = bridge.missing_points(take, every)
         if take.kind == "markers":
             write &= missing
-        plans.append(FillPlan(owner.name, take, write, missing, ids))
+        plans.append(FillPlan(owner.name, take, write, missing, ids, every))
     if not plans:
         raise GapFillError("no gaps to fill: detect or mark gaps first"
                            + (f" (or raise Max gap above {max_gap})" if max_gap else ""))
@@ -207,17 +220,33 @@ def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, 
             def step(fraction, message, i=i):
                 progress((i + fraction) / len(plans), f"{plan.owner}: {message}")
 
-            motion = plan.take.motion(plan.missing)
-            filled = fill(motion, method, kb=kb, settings=knn, progress=step,
+            take = plan.take
+            if take.kind == "armature" and method in ("knn", "auto"):
+                # rotation gaps: Blender's interpolation unless the KB measurably beats it
+                results.append((None, fill_armature(take, plan.bone_gaps, kb, knn, step,
+                                                    should_cancel, plan.messages.append)))
+                continue
+            filled = fill(take.motion(plan.missing), method, kb=kb, settings=knn, progress=step,
                           should_cancel=should_cancel).positions
             basis = None
-            if plan.take.kind == "armature":
-                basis, _ = bridge.solve_armature(plan.take, filled, plan.write)
+            if take.kind == "armature":
+                basis, _ = bridge.solve_armature(take, filled, plan.write)
             results.append((filled, basis))
         progress(1.0, "writing keys")
         return results
 
     return plans, work
+
+
+def fill_armature(take, bone_gaps, kb, settings, progress, should_cancel, report):
+    """Basis matrices of an armature take after the rotation fill (world metres for the KB)."""
+    from ..core.bonefill import fill_bones
+
+    to_metres = np.diag([take.metres] * 3 + [1.0]) @ take.world
+    return fill_bones(take.extra["rig"], take.extra["channels"], take.extra["location"],
+                      bone_gaps, take.fps, kb=kb, method="auto", moves=take.extra["moves"],
+                      to_metres=to_metres, settings=settings, progress=progress,
+                      should_cancel=should_cancel, report=report)
 
 
 def apply_fill(context, plans, results):
@@ -231,7 +260,10 @@ def apply_fill(context, plans, results):
             ok = plan.write & np.isfinite(filled[..., 0])
             written += bridge.write_markers(plan.take, filled, ok)
         else:
-            written += bridge.write_armature(plan.take, basis, plan.write)
+            # keys only where the fill changed something: elsewhere the F-curves' own
+            # interpolation across the gap is the answer
+            changed = np.abs(basis - plan.take.extra["basis"]).max(axis=(2, 3)) > 1e-6
+            written += bridge.write_armature(plan.take, basis, plan.write & changed)
         settings = owner.mocap_gapfill
         for i in plan.gap_ids:
             settings.gaps[i].filled = True

@@ -255,6 +255,9 @@ class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
 
     def finish(self, context, results):
         written = gaps.apply_fill(context, self._plans, results)
+        for plan in self._plans:
+            for message in plan.messages:
+                self.report({"INFO"}, f"{plan.owner}: {message}")
         self.report({"INFO"}, f"filled {written} samples in {len(self._plans)} take(s); "
                               "switch Original/Recovered to compare")
         return {"FINISHED"}

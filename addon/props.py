@@ -16,11 +16,14 @@ UNITS = (
     ("IN", "Inches", ""), ("CMU", "CMU units", "1/0.45 inch, the CMU ASF unit"),
 )
 METHOD_ITEMS = (
-    ("knn", "Knowledge base", "Nearest poses in the knowledge base, local PCA and optimisation"),
-    ("auto", "Knowledge base or spline", "Per point, spline interpolation where it refills "
-                                         "copies of the point's gaps clearly better than the "
-                                         "knowledge base (slow motion the KB does not cover)"),
-    ("linear", "Linear", "Linear interpolation, for comparison"),
+    ("knn", "Knowledge base", "Markers: nearest poses in the knowledge base, local PCA and "
+                              "optimisation. Armatures: only the gapped bones' rotations change, "
+                              "and only on gaps where the knowledge base refills copies of the "
+                              "gap better than Blender's own interpolation"),
+    ("auto", "Knowledge base or spline", "Markers: per point, spline interpolation where it "
+                                         "refills copies of the point's gaps clearly better than "
+                                         "the knowledge base. Armatures: as Knowledge base"),
+    ("linear", "Linear", "Linear interpolation of joint positions, for comparison"),
     ("spline", "Spline", "Cubic spline interpolation, for comparison"),
     ("intercorrelation", "Marker intercorrelation", "PCA of the take itself (no knowledge base)"),
     ("pca", "Global PCA", "PCA of the knowledge base"),

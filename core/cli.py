@@ -170,12 +170,28 @@ def _long_gaps(motion, max_gap):
 def cmd_evaluate(args):
     from .evaluate import evaluate, table
 
-    methods = args.methods or list(METHODS)
     progress = Progress(args.quiet)
-    results = evaluate(args.protocol, args.test, args.kb_sources, methods=methods, fps=args.fps,
-                       seed=args.seed, k=args.k, skip_frames=args.skip_frames,
-                       settings=args.settings, exclude=args.exclude_kb or (),
-                       progress=progress, report=_report)
+    if args.protocol == "bones":
+        from .bonefill import BONE_METHODS
+        from .evaluate import evaluate_bones
+
+        unknown = sorted(set(args.methods or ()) - set(BONE_METHODS))
+        if unknown:
+            raise GapFillError(f"protocol bones takes the methods {', '.join(BONE_METHODS)}")
+        methods = args.methods or list(BONE_METHODS)
+        results = evaluate_bones(args.test, args.kb_sources, methods, kb_fps=args.fps,
+                                 seed=args.seed, k=args.k, skip_frames=args.skip_frames,
+                                 settings=args.settings, exclude=args.exclude_kb or (),
+                                 progress=progress, report=_report)
+    else:
+        unknown = sorted(set(args.methods or ()) - set(METHODS))
+        if unknown:
+            raise GapFillError(f"unknown methods {', '.join(unknown)}")
+        methods = args.methods or list(METHODS)
+        results = evaluate(args.protocol, args.test, args.kb_sources, methods=methods,
+                           fps=args.fps, seed=args.seed, k=args.k, skip_frames=args.skip_frames,
+                           settings=args.settings, exclude=args.exclude_kb or (),
+                           progress=progress, report=_report)
     progress.done()
     print(table(results))
     if args.json:
@@ -258,15 +274,20 @@ def build_parser(extra=None):
     p.set_defaults(func=cmd_fill)
 
     p = sub.add_parser("evaluate", help="accuracy of the methods on punched gaps in real data")
-    p.add_argument("--protocol", required=True, choices=["joints", "markers", "bodyparts"])
+    p.add_argument("--protocol", required=True,
+                   choices=["joints", "markers", "bodyparts", "bones"],
+                   help="bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
+                        "rate; methods auto, knn, interp, slerp, positions")
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")
     p.add_argument("--kb-sources", nargs="+", required=True, metavar="PATH",
                    help="knowledge-base files/folders (the test subject is left out)")
-    p.add_argument("--methods", nargs="+", metavar="METHOD", choices=METHODS,
-                   help=f"some of {', '.join(METHODS)} (default: all)")
+    p.add_argument("--methods", nargs="+", metavar="METHOD",
+                   help=f"some of {', '.join(METHODS)} (default: all of the protocol's)")
     p.add_argument("--settings", nargs="+", metavar="LABEL",
                    help="only these settings, e.g. 'm=6,l=60' 'rate=0.2'")
-    p.add_argument("--fps", type=float, default=60.0, help="evaluation frame rate (default 60)")
+    p.add_argument("--fps", type=float, default=60.0,
+                   help="evaluation frame rate (default 60; for bones the KB's rate, the takes "
+                        "keep their own)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("-K", dest="k", type=int,
                    help="knn neighbours (default 4096, or the KB size if smaller)")

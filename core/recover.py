@@ -579,7 +579,7 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
         trajectory = np.where(model[..., None], pred, pos)
         trajectory[empty] = np.nan
         pred[empty] = fill_linear(trajectory)[empty]
-    return _blend_into_gaps(pos, pred, missing, model)
+    return blend_into_gaps(pos, pred, missing, model)
 
 
 def _model_sources(frames, model, fps, model_fps):
@@ -611,7 +611,7 @@ def _clip_lengths(pos, limbs, kb_poses):
     return lengths
 
 
-def _blend_into_gaps(pos, pred, missing, model):
+def blend_into_gaps(pos, pred, missing, model):
     """Observed values kept; each gap takes the prediction plus the observation-minus-prediction
     offset at its two ends, blended linearly (one end at clip ends)."""
     out = pos.copy()
@@ -629,4 +629,57 @@ def _blend_into_gaps(pos, pred, missing, model):
         else:
             shift = offsets[0] if offsets else 0.0
         out[a:b + 1, p] = seg + shift
+    return out
+
+
+def soft_poses(positions, names, uncertainty, kb, fps, settings=KnnSettings(), frames=None,
+               should_cancel=None):
+    """The local models' most likely poses near a complete first guess.
+
+    ``positions`` (frames, points, 3) world metres hold a value for every point; each value is
+    trusted to within ``uncertainty`` (frames, points) metres (0: known, larger: a guess, e.g.
+    interpolation deep inside a gap). For each of ``frames`` (default: those with some guessed
+    point) the K nearest knowledge-base poses over every point are searched, their local PCA
+    fitted (at most ``settings.model_fps`` models a second, shared like :func:`fill_knn`'s),
+    and the pose minimising ``w_r sum h^2/lambda + w_in sum_j |pose_j - x_j|^2 /
+    (noise + uncertainty_j^2)`` returned (the other frames unchanged); points the knowledge base
+    lacks stay as given.
+    """
+    pos = np.asarray(positions, dtype=float)
+    out = pos.copy()
+    common, _ = match_names(kb, names)
+    cols = [names.index(n) for n in common]
+    doubt = np.asarray(uncertainty, dtype=float)[:, cols]
+    rows = np.flatnonzero((doubt > 0).any(axis=1)) if frames is None else np.asarray(frames)
+    if not len(rows):
+        return out
+    reference = kb.reference_for(common)
+    index = KBIndex(kb.poses[:, [kb.names.index(n) for n in common]], settings.device)
+    if settings.k is None:
+        settings = replace(settings, k=min(DEFAULT_K, kb.size))
+    sub = pos[:, cols]
+    root, angle = frames_of(sub, reference, reference_template(index.poses, reference))
+    norm = normalize(sub[rows], root[rows], angle[rows])
+    var = np.repeat(doubt[rows] ** 2, 3, axis=1)
+    source = _model_sources(rows, doubt > 0, fps, settings.model_fps)
+    todo = np.unique(source)
+    rng = np.random.default_rng(settings.random_state)
+    poses = np.empty((len(rows), 3 * len(cols)))
+    for start in range(0, len(todo), settings.batch_frames):
+        if should_cancel and should_cancel():
+            raise KeyboardInterrupt
+        fit = todo[start:start + settings.batch_frames]
+        means, comps, lams, noise, _ = _fit_models(index, norm[fit],
+                                                   np.zeros(norm[fit].shape[:2], bool),
+                                                   settings, rng)
+        served = np.flatnonzero(np.isin(source, fit))
+        model = np.searchsorted(fit, source[served])
+        means, comps, lams, noise = means[model], comps[model], lams[model], noise[model]
+        weight = settings.w_in / (noise[:, None] + var[served])  # (q, 3n)
+        gram = comps.transpose(0, 2, 1) @ (comps * weight[..., None])
+        lin = ((means - norm[served].reshape(len(served), -1)) * weight)[:, None, :] @ comps
+        h = np.linalg.solve(_lhs(gram, lams, settings), -lin.transpose(0, 2, 1))[..., 0]
+        poses[served] = _poses(means, comps, h)
+    out[np.ix_(rows, cols)] = denormalize(poses.reshape(len(rows), len(cols), 3), root[rows],
+                                          angle[rows])
     return out

@@ -25,3 +25,12 @@ $MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
 $MG evaluate --protocol bodyparts --quiet --skip-frames 6 --kb-sources "$DAZ" \
   --test "$DAZ"/05/05_02.bvh.gz "$DAZ"/13/13_30.bvh.gz "$DAZ"/09/09_12.bvh.gz \
   --json docs/results/bodyparts_bvh43.json
+# armature rotation gaps at the takes' own rate (120 fps), KB at 60 fps
+$MG evaluate --protocol bones --quiet --skip-frames 6 --kb-sources "$DAZ" \
+  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
+         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
+         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --json docs/results/bones_bvh43.json
+$MG evaluate --protocol bones --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
+  --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
+  --json docs/results/bones_amc31.json

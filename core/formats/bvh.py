@@ -262,3 +262,65 @@ def read_bvh(path, units=None, skip_frames=0, end_sites=False):
         units=units,
         up_axis="y",
     )
+
+
+def read_bvh_rig(path, units=None, skip_frames=0):
+    """Read a BVH file as an armature the way Blender's BVH importer builds it (defaults: Y up,
+    -Z forward, rotation mode of each bone = its channel order, every frame keyed).
+
+    Returns ``(rig, channels, location, fps)``: a :class:`~..rig.Rig` in metres, Z up (bone
+    heads = the joints :func:`read_bvh` gives), and per frame the rotation channels
+    (frames, bones, 4) and location channels (frames, bones, 3) Blender keys.
+    """
+    from ..rig import Rig, bone_matrix, channels_of
+
+    bvh = parse_bvh(path)
+    units = units or guess_units(bvh)
+    if units not in UNIT_SCALES:
+        raise ParseError(f"unknown units {units!r} (use one of {', '.join(UNIT_SCALES)})", path)
+    if not 0 <= skip_frames <= bvh.values.shape[0]:
+        raise ParseError(f"cannot skip {skip_frames} of {bvh.values.shape[0]} frames", path)
+    scale = UNIT_SCALES[units]
+    values = bvh.values[skip_frames:]
+    joints = bvh.joints
+    head = np.zeros((len(joints), 3))
+    for j, joint in enumerate(joints):
+        head[j] = joint.offset * scale + (head[joint.parent] if joint.parent >= 0 else 0)
+    keep = [j for j, joint in enumerate(joints) if not joint.end_site]
+    remap = {old: new for new, old in enumerate(keep)}
+    to_z_up = np.eye(4)
+    to_z_up[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+    rest, modes, parents = [], [], []
+    frames = values.shape[0]
+    basis_rot = np.empty((frames, len(keep), 3, 3))
+    location = np.zeros((frames, len(keep), 3))
+    for new, j in enumerate(keep):
+        joint = joints[j]
+        kids = [c for c, child in enumerate(joints) if child.parent == j]
+        ends = [c for c in kids if joints[c].end_site]
+        if ends:
+            tail = head[ends[0]]
+        elif kids:
+            tail = head[kids].mean(axis=0)
+        else:
+            tail = head[j].copy()
+        if np.linalg.norm(tail - head[j]) <= 0.001 * scale:
+            tail = tail + [0.0, 0.1 * scale, 0.0]
+        bone = bone_matrix(head[j], tail)
+        rot = bone[:3, :3]
+        axes = "".join(_ROT[c] for c in joint.channels if c in _ROT)
+        modes.append(axes.upper() if len(axes) == 3 and len(set(axes)) == 3 else "XYZ")
+        cols = [joint.first_channel + k for k, c in enumerate(joint.channels) if c in _ROT]
+        local = compose(axes, [np.deg2rad(values[:, c]) for c in cols])
+        basis_rot[:, new] = rot.T @ local @ rot
+        moved = np.zeros((frames, 3))
+        for k, c in enumerate(joint.channels):
+            if c in _POS:
+                moved[:, _POS[c]] = values[:, joint.first_channel + k] * scale
+        if any(c in _POS for c in joint.channels):
+            location[:, new] = (moved - joint.offset * scale) @ rot
+        rest.append(to_z_up @ bone)
+        parents.append(remap.get(joint.parent, -1))
+    rig = Rig(tuple(joints[j].name for j in keep), tuple(parents), np.array(rest), tuple(modes))
+    channels = channels_of(basis_rot, rig.modes, previous=np.zeros((len(keep), 4)))
+    return rig, channels, location, snap_fps(1.0 / bvh.frame_time)

@@ -1,0 +1,363 @@
+"""Armature gaps are rotation gaps: fill the missing rotations of bones, keep every other key.
+
+A bone without keys over some frames has an unknown rotation there (and an unknown location where
+its location is animated); every other bone keeps its keyed channels, so the joints below a
+gapped bone ride along rigidly with it. What the animator sees across such a gap is the
+F-curve interpolation of the keys either side (``interp``): free and often good. The fill starts
+from it and changes only the gapped bones' rotations (and locations) on the gap frames:
+
+- ``knn``: the knowledge-base method of :mod:`.recover` predicts the joints the gaps leave
+  unknown from the joints that are known (every joint not below a gapped bone); then, top-down,
+  each gapped bone takes the rotation that best carries its rigid subtree - its descendants
+  posed by their own keys - onto those predictions (Kabsch about the bone's head), and a moving
+  bone the location that puts its head on the predicted joint. Limb lengths are exact by
+  construction, and the prediction meets the keys at both gap ends (:mod:`.recover` blends its
+  offsets into each gap), so the rotations do too.
+- ``auto`` (the default): per gap, ``knn`` only where it refills copies of that gap - same bone,
+  same length, placed where the bone is keyed - clearly better than ``interp`` does, else
+  ``interp`` (nothing changes). Never worse than doing nothing by design, on the evidence of the
+  take itself.
+- ``slerp``: quaternion slerp between the rotations at the keys either side of a gap.
+- ``positions``: the position-space fill of every joint below a gap, then each gapped bone turned
+  to its children's filled joints (what the add-on did before; kept for comparison).
+"""
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from .errors import GapFillError
+from .kb import match_names
+from .motion import Motion, gap_runs, skeleton_limbs
+from .posing import best_rotation, child_handles, forward, order_bones, rotation_between, \
+    solve_pose, tail_handles
+from .recover import blend_into_gaps
+from .rig import basis_matrices, interpolate_channels
+
+BONE_METHODS = ("auto", "knn", "interp", "slerp", "positions")
+NEEDS_KB = ("auto", "knn", "positions")
+#: ``auto`` takes the knowledge base for a gap when its error on the gap's copies is below this
+#: share of interpolation's
+AUTO_MARGIN = 0.8
+#: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
+AUTO_COPIES = 3
+COPY_MARGIN = 10
+#: where no copy of a gap fits in the take, ``auto`` takes the knowledge base for gaps of at
+#: least this many seconds and interpolation for shorter ones
+UNCHECKED_SECONDS = 0.5
+#: how fast (m/s) the interpolation of a gap is taken to drift from the truth, per second to
+#: the nearest key: how far ``knn`` lets the knowledge base move a joint (tuned, METHOD_NOTES)
+GUESS_SPEED = 0.1
+#: weight of the current (interpolated) rotation in each gapped bone's fit, as a share of the
+#: fitted joints' spread about the bone's head (pseudo-points; tuned, docs/METHOD_NOTES.md)
+STAY = 0.5
+
+
+def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
+               to_metres=None, settings=None, progress=None, should_cancel=None, report=None):
+    """Fill the rotation gaps of an armature take.
+
+    Parameters
+    ----------
+    rig : Rig
+    channels : ndarray, shape (frames, bones, 4)
+        Rotation channels as the animator sees them: keyed values, and across each gap what
+        the F-curves show (their interpolation of the keys either side).
+    location : ndarray, shape (frames, bones, 3)
+        Location channels, likewise.
+    gaps : ndarray, shape (frames, bones), bool
+        Frames where a bone has no keys: its rotation is unknown, and its location where the
+        bone moves (``moves``).
+    fps : float
+    kb : KnowledgeBase, optional
+        Needed by ``knn``, ``auto`` and ``positions``; joint names = bone names.
+    method : str
+        One of :data:`BONE_METHODS`.
+    moves : ndarray, shape (bones,), bool, optional
+        Bones whose location is animated (default: roots).
+    to_metres : ndarray, shape (4, 4), optional
+        Armature space -> world metres, Z up (default: identity).
+    settings : KnnSettings, optional
+
+    Returns
+    -------
+    ndarray, shape (frames, bones, 4, 4)
+        Basis matrices: the input's everywhere except the gapped bones on their gap frames.
+    """
+    if method not in BONE_METHODS:
+        raise GapFillError(f"unknown method {method!r}; choose from {', '.join(BONE_METHODS)}")
+    if method in NEEDS_KB and kb is None:
+        raise GapFillError(f"method {method!r} needs a knowledge base")
+    if method in NEEDS_KB:
+        match_names(kb, rig.names)  # a knowledge base of another skeleton: a clear error now
+    gaps = np.asarray(gaps, dtype=bool)
+    if gaps.shape != channels.shape[:2]:
+        raise GapFillError(f"gaps have shape {gaps.shape}, the take {channels.shape[:2]}")
+    moves = (np.array([p < 0 for p in rig.parents]) if moves is None
+             else np.asarray(moves, dtype=bool))
+    job = _Job(rig, fps, kb, moves, np.eye(4) if to_metres is None else np.asarray(to_metres),
+               settings, progress or (lambda fraction, message: None), should_cancel,
+               report or (lambda message: None))
+    basis = basis_matrices(rig, channels, location)
+    roots = np.array([p < 0 for p in rig.parents])
+    if method in NEEDS_KB and (gaps & roots).any():
+        # the knowledge base holds poses about the root, not where the body is
+        job.report("gaps of the root bone keep their interpolation")
+        gaps = gaps & ~roots
+    if method == "interp" or not gaps.any():
+        return basis
+    if method == "slerp":
+        return _slerp(basis, gaps, moves)
+    if method == "positions":
+        return job.positions(basis, gaps)
+    if method == "knn":
+        return job.knn(basis, gaps)
+    return job.auto(channels, location, basis, gaps)
+
+
+class _Job:
+    """One fill: the rig, the knowledge base and the callbacks its steps share."""
+
+    def __init__(self, rig, fps, kb, moves, to_metres, settings, progress, should_cancel,
+                 report):
+        self.rig, self.fps, self.kb, self.moves = rig, fps, kb, moves
+        self.to_metres = to_metres
+        self.settings = settings
+        self.progress, self.should_cancel, self.report = progress, should_cancel, report
+        self.below = rig.placed_by()
+        # a moving bone places its own head (heads rigs; a tails rig's root joint is its head)
+        self.own = moves & np.array([rig.lengths is None or p < 0 for p in rig.parents])
+
+    def unknown(self, gaps):
+        """(frames, joints) joints the gaps leave unknown."""
+        return (gaps.astype(np.int64) @ self.below.astype(np.int64) > 0) | (gaps & self.own)
+
+    def world(self, basis):
+        joints = self.rig.joints(basis)
+        return joints @ self.to_metres[:3, :3].T + self.to_metres[:3, 3]
+
+    def predict(self, basis, gaps):
+        """The knowledge base's joints (frames, joints, 3) in armature space where the gaps
+        leave them unknown, from nothing but the known joints (NaN where it cannot tell)."""
+        from .recover import KnnSettings, fill_knn
+
+        unknown = self.unknown(gaps)
+        pos = np.where(unknown[..., None], np.nan, self.world(basis))
+        motion = Motion(pos, self.rig.names, self.fps, parents=self.rig.parents,
+                        limbs=skeleton_limbs(self.rig.parents))
+        filled = fill_knn(motion, self.kb, self.settings or KnnSettings(),
+                          progress=self.progress, should_cancel=self.should_cancel,
+                          report=self.report).positions
+        return self.armature(filled, unknown)
+
+    def refine(self, basis, gaps):
+        """The local models' most likely joints near what the F-curves show: each joint a gap
+        leaves unknown is trusted to within ``GUESS_SPEED`` times its time to the nearest key
+        (:func:`~.recover.soft_poses`); armature space, NaN where known."""
+        from .recover import KnnSettings, soft_poses
+
+        unknown = self.unknown(gaps)
+        doubt = np.zeros(gaps.shape)
+        frames = np.arange(len(gaps))
+        for b, a, e in gap_runs(gaps):
+            away = np.minimum(frames[a:e + 1] - a + 1, e + 1 - frames[a:e + 1]) / self.fps
+            joints = self.below[b] | (self.own & (np.arange(len(self.own)) == b))
+            doubt[a:e + 1, joints] = np.maximum(doubt[a:e + 1, joints],
+                                                GUESS_SPEED * away[:, None])
+        # also model a frame either side of each gap: the model's offset from the keys there
+        # is blended across the gap (its bias, not the shape it gives the gap)
+        widened = unknown.copy()
+        widened[1:] |= unknown[:-1]
+        widened[:-1] |= unknown[1:]
+        seen = self.world(basis)
+        model = soft_poses(seen, list(self.rig.names), doubt, self.with_take(seen, unknown),
+                           self.fps, self.settings or KnnSettings(),
+                           frames=np.flatnonzero(widened.any(axis=1)),
+                           should_cancel=self.should_cancel)
+        world = blend_into_gaps(np.where(unknown[..., None], np.nan, seen), model, unknown,
+                                widened)
+        return self.armature(world, unknown)
+
+    def with_take(self, world, unknown):
+        """The knowledge base plus the take's own poses where no joint is unknown: the same
+        subject, the same style, the best neighbours where the take repeats itself."""
+        from .kb import KnowledgeBase, kb_from_motions
+
+        names = [n for n in self.kb.names if n in self.rig.names]
+        cols = [self.rig.names.index(n) for n in names]
+        keep = ~unknown[:, cols].any(axis=1)
+        if keep.sum() < 2:
+            return self.kb
+        own = kb_from_motions([Motion(world[keep][:, cols], names, self.fps)])
+        poses = np.full((own.size,) + self.kb.poses.shape[1:], np.nan, np.float32)
+        poses[:, [self.kb.names.index(n) for n in names]] = own.poses
+        if np.isnan(poses).any():
+            return self.kb
+        return KnowledgeBase(np.concatenate([self.kb.poses, poses]), self.kb.names, self.kb.fps,
+                             self.kb.limbs, self.kb.sources + ("this take",),
+                             np.concatenate([self.kb.source_index,
+                                             np.full(own.size, len(self.kb.sources), np.int32)]))
+
+    def armature(self, world, unknown):
+        inverse = np.linalg.inv(self.to_metres)
+        targets = world @ inverse[:3, :3].T + inverse[:3, 3]
+        targets[~unknown] = np.nan
+        return targets
+
+    def knn(self, basis, gaps):
+        return carry_subtrees(self.rig, basis, gaps, self.refine(basis, gaps), self.moves,
+                              self.below)
+
+    def positions(self, basis, gaps):
+        targets = self.predict(basis, gaps)
+        known = self.world(basis) @ np.linalg.inv(self.to_metres)[:3, :3].T \
+            + np.linalg.inv(self.to_metres)[:3, 3]
+        targets = np.where(np.isnan(targets), known, targets)
+        handles = (child_handles(self.rig.rest, self.rig.parents) if self.rig.lengths is None
+                   else tail_handles(self.rig.lengths, self.rig.parents))
+        out, _ = solve_pose(self.rig.rest, self.rig.parents, basis, targets, gaps,
+                            gaps & self.moves, handles)
+        return out
+
+    def auto(self, channels, location, basis, gaps):
+        """Per gap, knn where it refills the gap's copies clearly better than interpolation."""
+        copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
+        probe = np.zeros_like(gaps)
+        for _, b, start, length in copies:
+            probe[start:start + length, b] = True
+        runs = gap_runs(gaps)
+        use_knn = np.array([b - a + 1 >= UNCHECKED_SECONDS * self.fps for _, a, b in runs])
+        if copies:
+            hidden = basis_matrices(self.rig, interpolate_channels(channels, probe),
+                                    np.where((probe & self.moves)[..., None],
+                                             interpolate_channels(location, probe), location))
+            guess = self.knn(hidden, gaps | probe)
+            truth = self.world(basis)
+            err_interp = self._errors(hidden, truth, copies)
+            err_knn = self._errors(guess, truth, copies)
+            owner = np.array([c[0] for c in copies])
+            for i in np.unique(owner):
+                use_knn[i] = err_knn[owner == i].sum() < AUTO_MARGIN * err_interp[owner == i].sum()
+        chosen = np.zeros_like(gaps)
+        for (b, a, e), knn in zip(runs, use_knn):
+            chosen[a:e + 1, b] = knn
+        if use_knn.any():
+            self.report(f"auto: the knowledge base fills {int(use_knn.sum())} of {len(runs)} gaps, "
+                        "interpolation the others")
+        else:
+            self.report("auto: interpolation kept on every gap (the knowledge base did not "
+                        "refill copies of them better)")
+            return basis
+        # knn of the chosen gaps only; the others stay what the F-curves show
+        filled = self.knn(basis, chosen)
+        return filled
+
+    def _errors(self, basis, truth, copies):
+        """Squared joint error (metres^2, summed) of each copy: the joints its bone moves."""
+        world = self.world(basis)
+        out = np.empty(len(copies))
+        for i, (_, b, start, length) in enumerate(copies):
+            joints = self.below[b] | (self.own & (np.arange(len(self.own)) == b))
+            diff = world[start:start + length, joints] - truth[start:start + length, joints]
+            out[i] = np.nansum(diff ** 2)
+        return out
+
+
+def carry_subtrees(rig, basis, gaps, targets, moves, below=None, stay=STAY):
+    """Basis matrices where each gapped bone (top-down) takes the location that puts its head
+    on its target (moving bones) and the rotation that best carries the joints it moves, posed
+    by their own channels, onto their targets (Kabsch about its head; the smallest turn from
+    the current rotation where those joints are collinear, which keeps the current twist).
+    ``stay`` weighs the current rotation in the fit (0: the targets alone)."""
+    basis = np.array(basis, dtype=float)
+    below = rig.placed_by() if below is None else below
+    parents = rig.parents
+    local = np.linalg.inv(rig.rest)
+    for b in order_bones(parents):
+        frames = np.flatnonzero(gaps[:, b])
+        if not len(frames):
+            continue
+        pose = forward(rig.rest, parents, basis[frames])
+        p = parents[b]
+        above = rig.rest[b] if p < 0 else pose[:, p] @ local[p] @ rig.rest[b]
+        above = np.broadcast_to(above, (len(frames), 4, 4))
+        if moves[b] and (rig.lengths is None or p < 0):
+            aim = targets[frames, b]
+            ok = np.isfinite(aim[:, 0])
+            basis[frames[ok], b, :3, 3] = np.einsum("fji,fj->fi", above[ok, :3, :3],
+                                                    aim[ok] - above[ok, :3, 3])
+        joints = np.flatnonzero(below[b])
+        if not len(joints):
+            continue
+        # joints that another gapped bone below this one moves have no known shape here
+        others = gaps[frames] & below[b]
+        others[:, b] = False
+        use = ~((others.astype(np.int64) @ below.astype(np.int64)) > 0)[:, joints]
+        aim = targets[frames][:, joints]
+        use &= np.isfinite(aim[..., 0])
+        ok = use.any(axis=1)
+        if not ok.any():
+            continue
+        frames, above, aim, use = frames[ok], above[ok], np.nan_to_num(aim[ok]), use[ok]
+        frame_of_bone = above @ basis[frames, b]  # with the current rotation
+        now = rig.joints(basis[frames])[:, joints]
+        inv = np.linalg.inv(frame_of_bone)
+        y = (np.einsum("fij,fkj->fki", inv[:, :3, :3], now) + inv[:, None, :3, 3]) * use[..., None]
+        inv_above = np.linalg.inv(above)
+        w = (np.einsum("fij,fkj->fki", inv_above[:, :3, :3], aim) + inv_above[:, None, :3, 3]
+             - basis[frames, b, None, :3, 3]) * use[..., None]
+        current = basis[frames, b, :3, :3]
+        # pseudo-points that pull towards the current rotation: joints near the bone's axis
+        # (fingers about a forearm) would otherwise turn it on the targets' noise
+        pull = np.sqrt(stay * (y ** 2).sum(axis=(1, 2)))[:, None, None] * np.eye(3)
+        turn, determined = best_rotation(np.concatenate([y, pull], axis=1),
+                                          np.concatenate([w, pull @ np.swapaxes(current, 1, 2)],
+                                                         axis=1))
+        # collinear joints leave the twist free: keep the current one
+        mean_y = np.einsum("fij,fj->fi", current, y.sum(axis=1))
+        smallest = rotation_between(mean_y, w.sum(axis=1)) @ current
+        basis[frames, b, :3, :3] = np.where(determined[:, None, None], turn, smallest)
+    return basis
+
+
+def _slerp(basis, gaps, moves):
+    out = basis.copy()
+    frames = len(basis)
+    for b, a, e in gap_runs(gaps):
+        ends = [t for t in (a - 1, e + 1) if 0 <= t < frames]
+        if len(ends) < 2:
+            continue  # at a clip end the held key is all there is
+        rot = Rotation.from_matrix(basis[ends, b, :3, :3])
+        out[a:e + 1, b, :3, :3] = Slerp(ends, rot)(np.arange(a, e + 1)).as_matrix()
+        if moves[b]:
+            w = ((np.arange(a, e + 1) - ends[0]) / (ends[1] - ends[0]))[:, None]
+            out[a:e + 1, b, :3, 3] = basis[ends[0], b, :3, 3] * (1 - w) + basis[ends[1], b, :3, 3] * w
+    return out
+
+
+def gap_copies(gaps, per_gap=3, margin=10):
+    """Copies of each gap where its bone is keyed: ``(gap index, bone, start, length)``, the
+    gap index into :func:`~.motion.gap_runs` order; up to ``per_gap`` per gap, at the nearest
+    shifts (by at least the gap's length plus ``margin``) that keep ``margin`` keyed frames
+    to every gap and copy of that bone, with a key on each side."""
+    frames = len(gaps)
+    taken = gaps.copy()
+    out = []
+    for i, (b, a, e) in enumerate(gap_runs(gaps)):
+        length = e - a + 1
+        step = length + margin
+        found = 0
+        for k in range(1, frames // max(step, 1) + 2):
+            for start in (a - k * step, a + k * step):
+                lo, hi = start - margin, start + length + margin
+                if start < 1 or start + length > frames - 1:
+                    continue
+                if taken[max(lo, 0):min(hi, frames), b].any():
+                    continue
+                taken[start:start + length, b] = True
+                out.append((i, b, start, length))
+                found += 1
+                if found == per_gap:
+                    break
+            if found == per_gap:
+                break
+    return out

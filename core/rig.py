@@ -1,0 +1,253 @@
+"""Armatures as the core sees them: bones, their rotation channels per frame, and FK.
+
+An armature (:class:`Rig`) is a tree of bones with rest matrices in armature space (Blender's
+``Bone.matrix_local``) and one rotation mode per bone (an Euler order such as ``"ZXY"``,
+``"QUATERNION"`` or ``"AXIS_ANGLE"``). A pose over a take is what the animator keys:
+
+- ``channels`` (frames, bones, 4): each bone's rotation channels in its own mode (Euler: the
+  angles about X, Y, Z in radians, 4th value unused; quaternion: w, x, y, z; axis-angle: angle,
+  x, y, z), as Blender's F-curves give them;
+- ``location`` (frames, bones, 3): each bone's location channels (bone space).
+
+``basis = T(location) R(channels)`` (Blender's ``PoseBone.matrix_basis`` without scale), and
+:func:`~.posing.forward` turns basis matrices into pose matrices. The joints of a rig are the
+bone heads (a BVH armature), or for rigs with ``lengths`` (our ASF/AMC import: one bone per
+segment) the bone tails and the root's head.
+
+Rotations go through ``scipy.spatial.transform.Rotation``. Rest matrices of bones made from a
+head and a tail follow Blender's rule for a bone with zero roll (:func:`bone_matrix`), so a rig
+built here from a BVH file has the rest matrices and the Euler channel values Blender's own BVH
+importer gives the same file (checked against the bpy module in tests/addon).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .errors import GapFillError
+from .posing import forward
+
+EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
+ROTATION_MODES = EULER_ORDERS + ("QUATERNION", "AXIS_ANGLE")
+
+
+@dataclass(frozen=True, eq=False)
+class Rig:
+    """Bones of an armature.
+
+    Parameters
+    ----------
+    names : tuple of str
+    parents : tuple of int
+        Parent bone per bone, -1 for a root.
+    rest : ndarray, shape (bones, 4, 4)
+        Rest matrices in armature space.
+    modes : tuple of str
+        Rotation mode per bone (:data:`ROTATION_MODES`).
+    lengths : ndarray, shape (bones,), or None
+        Bone lengths where joints are bone tails; None where joints are bone heads.
+    """
+
+    names: tuple
+    parents: tuple
+    rest: np.ndarray
+    modes: tuple
+    lengths: np.ndarray = None
+
+    def __post_init__(self):
+        n = len(self.names)
+        rest = np.asarray(self.rest, dtype=float)
+        if rest.shape != (n, 4, 4) or len(self.parents) != n or len(self.modes) != n:
+            raise GapFillError(f"a rig of {n} bones needs {n} parents, rest matrices and modes")
+        unknown = sorted(set(self.modes) - set(ROTATION_MODES))
+        if unknown:
+            raise GapFillError(f"unknown rotation modes: {', '.join(unknown)}")
+        object.__setattr__(self, "rest", rest)
+        object.__setattr__(self, "parents", tuple(int(p) for p in self.parents))
+
+    def joints(self, basis):
+        """Joint positions (frames, bones, 3) in armature space for basis matrices."""
+        pose = forward(self.rest, self.parents, basis)
+        if self.lengths is None:
+            return pose[..., :3, 3].copy()
+        tip = pose[..., :3, 3] + pose[..., :3, 1] * np.asarray(self.lengths)[:, None]
+        roots = np.array([p < 0 for p in self.parents])
+        tip[:, roots] = pose[..., :3, 3][:, roots]
+        return tip
+
+    def placed_by(self):
+        """(bones, bones) bool: ``[b, j]`` where bone ``b``'s rotation moves joint ``j`` (its
+        descendants' joints, and its own tail where joints are tails)."""
+        n = len(self.parents)
+        below = np.zeros((n, n), bool)
+        for b in range(n):  # walk up from each bone
+            p = self.parents[b]
+            while p >= 0:
+                below[p, b] = True
+                p = self.parents[p]
+        if self.lengths is not None:
+            below |= np.eye(n, dtype=bool) & np.array([p >= 0 for p in self.parents])[:, None]
+        return below
+
+
+def rotations(channels, modes):
+    """Rotation matrices (frames, bones, 3, 3) of rotation channels (frames, bones, 4)."""
+    channels = np.asarray(channels, dtype=float)
+    out = np.empty(channels.shape[:2] + (3, 3))
+    for b, mode in enumerate(modes):
+        out[:, b] = _rotation(channels[:, b], mode).as_matrix()
+    return out
+
+
+def _rotation(values, mode):
+    if mode == "QUATERNION":
+        q = values[:, :4]
+        norm = np.linalg.norm(q, axis=1, keepdims=True)
+        q = np.where(norm > 0, q / np.where(norm > 0, norm, 1), [1.0, 0, 0, 0])
+        return Rotation.from_quat(q, scalar_first=True)
+    if mode == "AXIS_ANGLE":
+        axis = values[:, 1:4]
+        norm = np.linalg.norm(axis, axis=1, keepdims=True)
+        axis = np.where(norm > 0, axis / np.where(norm > 0, norm, 1), [0.0, 1.0, 0.0])
+        return Rotation.from_rotvec(axis * values[:, :1])
+    # Blender's order "ZXY" turns about Z first: scipy's extrinsic "zxy"
+    order = [("XYZ".index(a)) for a in mode]
+    return Rotation.from_euler(mode.lower(), values[:, order])
+
+
+def channels_of(matrices, modes, previous=None):
+    """Rotation channels (frames, bones, 4) of rotation matrices (frames, bones, 3, 3), each
+    frame's values chosen closest to the frame before (``previous``, (bones, 4), before the
+    first): Euler angles of the two equivalent solutions the one nearer after unwrapping by
+    whole turns (Blender's compatible Euler), quaternions in the same hemisphere."""
+    frames, bones = matrices.shape[:2]
+    out = np.zeros((frames, bones, 4))
+    for b, mode in enumerate(modes):
+        rot = Rotation.from_matrix(matrices[:, b])
+        prev = None if previous is None else np.asarray(previous, dtype=float)[b]
+        if mode == "QUATERNION":
+            q = rot.as_quat(scalar_first=True)
+            flip = np.ones(frames)
+            flip[1:] = np.sign(np.sum(q[1:] * q[:-1], axis=1) + 1e-300)
+            flip = np.cumprod(flip)
+            if prev is not None and np.dot(q[0], prev) * flip[0] < 0:
+                flip = -flip
+            out[:, b] = q * flip[:, None]
+        elif mode == "AXIS_ANGLE":
+            v = rot.as_rotvec()
+            angle = np.linalg.norm(v, axis=1)
+            axis = np.where(angle[:, None] > 1e-12, v / np.maximum(angle, 1e-300)[:, None],
+                            [0.0, 1.0, 0.0])
+            out[:, b] = np.concatenate([angle[:, None], axis], axis=1)
+        else:
+            out[:, b, :3] = _compatible_euler(rot, mode, prev)
+    return out
+
+
+def _compatible_euler(rot, mode, prev):
+    order = [("XYZ".index(a)) for a in mode]
+    first = rot.as_euler(mode.lower())  # in the order of ``mode``
+    second = first + np.pi
+    second[:, 1] = np.pi - first[:, 1]
+    result = np.empty_like(first)
+    last = None if prev is None else np.asarray(prev)[order]
+    for f in range(len(first)):
+        if last is None:
+            pick = first[f]
+        else:
+            a = first[f] - np.round((first[f] - last) / (2 * np.pi)) * 2 * np.pi
+            b = second[f] - np.round((second[f] - last) / (2 * np.pi)) * 2 * np.pi
+            pick = b if np.abs(b - last).sum() < np.abs(a - last).sum() else a
+        result[f] = last = pick
+    xyz = np.empty_like(result)
+    xyz[:, order] = result
+    return xyz
+
+
+def basis_matrices(rig, channels, location):
+    """Basis matrices (frames, bones, 4, 4) from rotation and location channels."""
+    frames = channels.shape[0]
+    basis = np.zeros((frames, len(rig.names), 4, 4))
+    basis[..., :3, :3] = rotations(channels, rig.modes)
+    basis[..., :3, 3] = location
+    basis[..., 3, 3] = 1.0
+    return basis
+
+
+def interpolate_channels(values, gaps):
+    """Values (frames, bones, k) with the frames of each gap (``gaps`` (frames, bones) bool)
+    replaced by linear interpolation of the values either side, held at clip ends: what
+    Blender's F-curves with LINEAR keys show once the keys in a gap are deleted."""
+    out = np.array(values, dtype=float)
+    frames = np.arange(len(out))
+    for b in np.flatnonzero(gaps.any(axis=0)):
+        keyed = ~gaps[:, b]
+        if not keyed.any():
+            continue
+        for k in range(out.shape[2]):
+            out[~keyed, b, k] = np.interp(frames[~keyed], frames[keyed], out[keyed, b, k])
+    return out
+
+
+def bone_matrix(head, tail, roll=0.0):
+    """Rest matrix (4, 4) of a bone from its head and tail with ``roll`` (Blender's
+    ``vec_roll_to_mat3``: the Y axis along the bone, the smallest turn from +Y, then the roll).
+    """
+    head, tail = np.asarray(head, float), np.asarray(tail, float)
+    y = tail - head
+    x0, y0, z0 = y / np.linalg.norm(y)
+    theta, theta_alt = 1.0 + y0, x0 * x0 + z0 * z0
+    if theta > 6.1e-3 or theta_alt > 2.5e-4 ** 2:
+        if theta <= 6.1e-3:
+            theta = theta_alt * 0.5 + theta_alt * theta_alt * 0.125
+        m = np.array([[1 - x0 * x0 / theta, x0, -x0 * z0 / theta],
+                      [-x0, y0, -z0],
+                      [-x0 * z0 / theta, z0, 1 - z0 * z0 / theta]])
+    else:  # pointing down -Y: the symmetric choice
+        m = np.diag([-1.0, -1.0, 1.0])
+    m = Rotation.from_rotvec(np.array([x0, y0, z0]) * roll).as_matrix() @ m
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = m, head
+    return out
+
+
+def bone_ends(motion):
+    """Head and tail (bones, 3) of the one-bone-per-segment armature of a skeleton motion, in
+    its first complete frame: each bone from its parent joint to its joint; a root bone points
+    0.1 m up from the root; a zero-length segment points 0.1 mm along its parent's bone."""
+    complete = np.flatnonzero(~motion.missing.any(axis=1))
+    if motion.parents is None or not len(complete):
+        raise GapFillError("an armature needs a skeleton with a complete frame")
+    pos = motion.positions[complete[0]]
+    heads, tails = pos.copy(), pos.copy()
+    for j, p in enumerate(motion.parents):
+        if p < 0:
+            tails[j] = pos[j] + [0.0, 0.0, 0.1]
+            continue
+        heads[j] = pos[p]
+        if np.linalg.norm(pos[j] - pos[p]) <= 1e-4:
+            up = pos[p] - pos[motion.parents[p]] if motion.parents[p] >= 0 else np.zeros(3)
+            norm = np.linalg.norm(up)
+            tails[j] = pos[p] + 1e-4 * (up / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0]))
+    return heads, tails
+
+
+def rig_from_motion(motion):
+    """The armature the add-on's skeleton import builds for a skeleton motion (one bone per
+    segment, joints = bone tails, quaternion rotations) and its channels: ``(rig, channels,
+    location)``, the root's location keyed and every bone's rotation solved from the joints."""
+    from .posing import solve_pose, tail_handles
+
+    heads, tails = bone_ends(motion)
+    rest = np.stack([bone_matrix(h, t) for h, t in zip(heads, tails)])
+    lengths = np.linalg.norm(tails - heads, axis=1)
+    n = motion.n_points
+    rig = Rig(motion.names, motion.parents, rest, ("QUATERNION",) * n, lengths)
+    present = ~motion.missing
+    roots = np.array([p < 0 for p in motion.parents])
+    reference = np.broadcast_to(np.eye(4), (motion.n_frames, n, 4, 4))
+    basis, _ = solve_pose(rest, motion.parents, reference, motion.positions, present & ~roots,
+                          present & roots, tail_handles(lengths, motion.parents))
+    channels = channels_of(basis[..., :3, :3], rig.modes)
+    return rig, channels, basis[..., :3, 3].copy()
