@@ -3,23 +3,28 @@
 A bone without keys over some frames has an unknown rotation there (and an unknown location where
 its location is animated); every other bone keeps its keyed channels, so the joints below a
 gapped bone ride along rigidly with it. What the animator sees across such a gap is the
-F-curve interpolation of the keys either side (``interp``): free and often good. The fill starts
-from it and changes only the gapped bones' rotations (and locations) on the gap frames:
+F-curve interpolation of the keys either side (``interp``): free and often good. Every method
+starts from the keys and changes only the gapped bones' rotations (and locations) on the gap
+frames:
 
-- ``knn``: the knowledge-base method of :mod:`.recover` predicts the joints the gaps leave
-  unknown from the joints that are known (every joint not below a gapped bone); then, top-down,
-  each gapped bone takes the rotation that best carries its rigid subtree - its descendants
-  posed by their own keys - onto those predictions (Kabsch about the bone's head), and a moving
-  bone the location that puts its head on the predicted joint. Limb lengths are exact by
-  construction, and the prediction meets the keys at both gap ends (:mod:`.recover` blends its
-  offsets into each gap), so the rotations do too.
-- ``auto`` (the default): per gap, ``knn`` only where it refills copies of that gap - same bone,
-  same length, placed where the bone is keyed - clearly better than ``interp`` does, else
-  ``interp`` (nothing changes). Never worse than doing nothing by design, on the evidence of the
-  take itself.
-- ``slerp``: quaternion slerp between the rotations at the keys either side of a gap.
+- ``hermite``: each channel a cubic from the key before the gap to the key after it, leaving and
+  arriving with the velocities the keys show (damped on gaps over ``HERMITE_SECONDS``);
+- ``knn``: the knowledge base near ``hermite``: the local models of :mod:`.recover`, fitted to
+  the K nearest poses over every joint, pull the joints the gaps move towards likely poses, the
+  more the further a frame lies from a key (:func:`~.recover.soft_poses`, the take's own
+  complete poses added to the KB); then, top-down, each gapped bone takes the rotation that
+  best carries its rigid subtree - its descendants posed by their own keys - onto those joints
+  (:func:`carry_subtrees`). Limb lengths are exact by construction;
+- ``auto`` (the default): per gap, half-way from ``interp`` to ``knn``, or ``knn``, or ``interp``,
+  as copies of the gap - same bone, same length, placed where the bone is keyed - refilled by each
+  say (:meth:`_Job.auto`);
+- ``slerp``: quaternion slerp between the rotations at the keys either side;
 - ``positions``: the position-space fill of every joint below a gap, then each gapped bone turned
   to its children's filled joints (what the add-on did before; kept for comparison).
+
+Root bones are never handed to the knowledge base (it holds poses about the root, not where the
+body goes): ``knn`` and ``auto`` give their gaps ``hermite``'s curve (``knn``) or leave them to
+the interpolation (``auto`` decides per gap like any other).
 """
 
 import numpy as np
@@ -31,19 +36,24 @@ from .motion import Motion, gap_runs, skeleton_limbs
 from .posing import best_rotation, child_handles, forward, order_bones, rotation_between, \
     solve_pose, tail_handles
 from .recover import blend_into_gaps
-from .rig import basis_matrices, interpolate_channels
+from .rig import basis_matrices, hermite_channels, interpolate_channels
 
-BONE_METHODS = ("auto", "knn", "interp", "slerp", "positions")
+BONE_METHODS = ("auto", "knn", "interp", "hermite", "slerp", "positions")
+#: what ``auto`` chooses from, per gap
+AUTO_CANDIDATES = ("interp", "half", "knn")
 NEEDS_KB = ("auto", "knn", "positions")
-#: ``auto`` takes the knowledge base for a gap when its error on the gap's copies is below this
-#: share of interpolation's
-AUTO_MARGIN = 0.8
+#: ``auto`` takes ``knn`` for a gap where its error on the gap's copies is below this share of
+#: interpolation's (and below ``half``'s), interpolation where ``half``'s is above ``DEMOTE``
+#: times it (tuned on non-test subjects, docs/METHOD_NOTES.md)
+PROMOTE = 0.6
+DEMOTE = 1.1
+#: weight (in copies) of the take's mean over all copies in each gap's score
+SHRINK = 2.0
 #: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
 AUTO_COPIES = 3
 COPY_MARGIN = 10
-#: where no copy of a gap fits in the take, ``auto`` takes the knowledge base for gaps of at
-#: least this many seconds and interpolation for shorter ones
-UNCHECKED_SECONDS = 0.5
+#: ``hermite`` carries the velocities at a gap's ends as if the gap lasted at most this long
+HERMITE_SECONDS = 0.5
 #: how fast (m/s) the interpolation of a gap is taken to drift from the truth, per second to
 #: the nearest key: how far ``knn`` lets the knowledge base move a joint (tuned, METHOD_NOTES)
 GUESS_SPEED = 0.1
@@ -97,21 +107,18 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     job = _Job(rig, fps, kb, moves, np.eye(4) if to_metres is None else np.asarray(to_metres),
                settings, progress or (lambda fraction, message: None), should_cancel,
                report or (lambda message: None))
-    basis = basis_matrices(rig, channels, location)
-    roots = np.array([p < 0 for p in rig.parents])
-    if method in NEEDS_KB and (gaps & roots).any():
-        # the knowledge base holds poses about the root, not where the body is
-        job.report("gaps of the root bone keep their interpolation")
-        gaps = gaps & ~roots
+    seen = basis_matrices(rig, channels, location)
     if method == "interp" or not gaps.any():
-        return basis
+        return seen
     if method == "slerp":
-        return _slerp(basis, gaps, moves)
+        return _slerp(seen, gaps, moves)
+    if method == "hermite":
+        return job.hermite(channels, location, gaps)
     if method == "positions":
-        return job.positions(basis, gaps)
+        return job.positions(seen, job.for_kb(gaps))
     if method == "knn":
-        return job.knn(basis, gaps)
-    return job.auto(channels, location, basis, gaps)
+        return job.knn(job.hermite(channels, location, gaps), job.for_kb(gaps))
+    return job.auto(channels, location, gaps)
 
 
 class _Job:
@@ -218,38 +225,75 @@ class _Job:
                             gaps & self.moves, handles)
         return out
 
-    def auto(self, channels, location, basis, gaps):
-        """Per gap, knn where it refills the gap's copies clearly better than interpolation."""
+    def for_kb(self, gaps):
+        """The gaps the knowledge base can fill: not those of root bones (it holds poses about
+        the root, not where the body is)."""
+        roots = np.array([p < 0 for p in self.rig.parents])
+        if (gaps & roots).any():
+            self.report("gaps of the root bone are interpolated (the knowledge base knows poses, "
+                        "not where the body goes)")
+        return gaps & ~roots
+
+    def hermite(self, channels, location, gaps):
+        moving = gaps & self.moves
+        damping = HERMITE_SECONDS * self.fps
+        return basis_matrices(self.rig, hermite_channels(channels, gaps, damping),
+                              hermite_channels(location, moving, damping))
+
+    def candidates(self, channels, location, gaps, names):
+        """Basis matrices of the named candidates (of :data:`AUTO_CANDIDATES`) for these gaps."""
+        out = {"interp": basis_matrices(self.rig, channels, location)}
+        if {"knn", "half"} & set(names):
+            out["knn"] = self.knn(self.hermite(channels, location, gaps), self.for_kb(gaps))
+            out["half"] = halfway(out["interp"], out["knn"], gaps)
+        return out
+
+    def auto(self, channels, location, gaps):
+        """Per gap: ``half`` (half-way from Blender's interpolation to ``knn``) unless the
+        copies of the gap say otherwise: ``knn`` or ``half`` where the better of them refills
+        the copies below :data:`PROMOTE` of interpolation's error and below ``half``'s,
+        interpolation where ``half`` refills them worse than :data:`DEMOTE` times it."""
+        seen = basis_matrices(self.rig, channels, location)
         copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
-        probe = np.zeros_like(gaps)
-        for _, b, start, length in copies:
-            probe[start:start + length, b] = True
         runs = gap_runs(gaps)
-        use_knn = np.array([b - a + 1 >= UNCHECKED_SECONDS * self.fps for _, a, b in runs])
+        choice = ["half"] * len(runs)
         if copies:
-            hidden = basis_matrices(self.rig, interpolate_channels(channels, probe),
-                                    np.where((probe & self.moves)[..., None],
-                                             interpolate_channels(location, probe), location))
-            guess = self.knn(hidden, gaps | probe)
-            truth = self.world(basis)
-            err_interp = self._errors(hidden, truth, copies)
-            err_knn = self._errors(guess, truth, copies)
+            probe = np.zeros_like(gaps)
+            for _, b, start, length in copies:
+                probe[start:start + length, b] = True
+            hidden = interpolate_channels(channels, probe)
+            hidden_loc = np.where((probe & self.moves)[..., None],
+                                  interpolate_channels(location, probe), location)
+            tried = self.candidates(hidden, hidden_loc, gaps | probe, AUTO_CANDIDATES)
+            truth = self.world(seen)
+            errors = {name: self._errors(basis, truth, copies) for name, basis in tried.items()}
+            # log error ratio to interpolation per copy (1 mm^2 per joint and frame keeps still
+            # bones at 0); per gap the mean over its copies, shrunk towards the take's mean
+            floor = np.array([1e-6 * c[3] * (self.below[c[1]].sum() + 1) for c in copies])
             owner = np.array([c[0] for c in copies])
             for i in np.unique(owner):
-                use_knn[i] = err_knn[owner == i].sum() < AUTO_MARGIN * err_interp[owner == i].sum()
-        chosen = np.zeros_like(gaps)
-        for (b, a, e), knn in zip(runs, use_knn):
-            chosen[a:e + 1, b] = knn
-        if use_knn.any():
-            self.report(f"auto: the knowledge base fills {int(use_knn.sum())} of {len(runs)} gaps, "
-                        "interpolation the others")
-        else:
-            self.report("auto: interpolation kept on every gap (the knowledge base did not "
-                        "refill copies of them better)")
-            return basis
-        # knn of the chosen gaps only; the others stay what the F-curves show
-        filled = self.knn(basis, chosen)
-        return filled
+                score = {}
+                for name in ("half", "knn"):
+                    ratio = np.log((errors[name] + floor) / (errors["interp"] + floor))
+                    score[name] = ((ratio[owner == i].sum() + SHRINK * ratio.mean())
+                                   / ((owner == i).sum() + SHRINK))
+                if score["knn"] < min(score["half"], np.log(PROMOTE)):
+                    choice[i] = "knn"
+                elif score["half"] > np.log(DEMOTE):
+                    choice[i] = "interp"
+        counts = {name: choice.count(name) for name in AUTO_CANDIDATES if choice.count(name)}
+        self.report("auto: " + ", ".join(f"{name} on {n} of {len(runs)} gaps"
+                                         for name, n in counts.items()))
+        wanted = np.zeros_like(gaps)
+        for (b, a, e), name in zip(runs, choice):
+            wanted[a:e + 1, b] = name != "interp"
+        if not wanted.any():
+            return seen
+        made = self.candidates(channels, location, wanted, set(choice))
+        out = seen.copy()
+        for (b, a, e), name in zip(runs, choice):
+            out[a:e + 1, b] = made[name][a:e + 1, b]
+        return out
 
     def _errors(self, basis, truth, copies):
         """Squared joint error (metres^2, summed) of each copy: the joints its bone moves."""
@@ -317,6 +361,18 @@ def carry_subtrees(rig, basis, gaps, targets, moves, below=None, stay=STAY):
         smallest = rotation_between(mean_y, w.sum(axis=1)) @ current
         basis[frames, b, :3, :3] = np.where(determined[:, None, None], turn, smallest)
     return basis
+
+
+def halfway(start, end, gaps, share=0.5):
+    """Basis matrices ``share`` of the way from ``start`` to ``end`` on the gap frames (rotations
+    along the shortest turn, locations on the straight line)."""
+    out = start.copy()
+    a, b = Rotation.from_matrix(start[gaps][:, :3, :3]), Rotation.from_matrix(end[gaps][:, :3, :3])
+    part = out[gaps]
+    part[:, :3, :3] = (Rotation.from_rotvec((b * a.inv()).as_rotvec() * share) * a).as_matrix()
+    part[:, :3, 3] = start[gaps][:, :3, 3] * (1 - share) + end[gaps][:, :3, 3] * share
+    out[gaps] = part
+    return out
 
 
 def _slerp(basis, gaps, moves):

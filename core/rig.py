@@ -251,3 +251,31 @@ def rig_from_motion(motion):
                           present & roots, tail_handles(lengths, motion.parents))
     channels = channels_of(basis[..., :3, :3], rig.modes)
     return rig, channels, basis[..., :3, 3].copy()
+
+
+def hermite_channels(values, gaps, damping=None):
+    """Like :func:`interpolate_channels`, but each gap with two keys on both sides takes the
+    cubic (Hermite) curve that leaves the key before it and reaches the key after it with the
+    velocities those keys show (one-frame differences): smooth motion stays smooth through
+    the gap. Gaps at clip ends, or without a second key on a side, stay linear. With
+    ``damping`` (frames), the velocities of a gap spanning more frames are scaled by
+    ``damping / span``: a long gap does not carry the end velocities far (overshoot)."""
+    out = interpolate_channels(values, gaps)
+    frames = len(out)
+    for b in np.flatnonzero(gaps.any(axis=0)):
+        for a, e in _runs(gaps[:, b]):
+            if a < 2 or e > frames - 3 or gaps[a - 2, b] or gaps[e + 2, b]:
+                continue
+            span = e - a + 2
+            s = ((np.arange(a, e + 1) - (a - 1)) / span)[:, None]
+            x0, x1 = out[a - 1, b], out[e + 1, b]
+            scale = span if damping is None else min(span, damping)
+            v0, v1 = (x0 - out[a - 2, b]) * scale, (out[e + 2, b] - x1) * scale
+            out[a:e + 1, b] = ((2 * s ** 3 - 3 * s ** 2 + 1) * x0 + (s ** 3 - 2 * s ** 2 + s) * v0
+                               + (3 * s ** 2 - 2 * s ** 3) * x1 + (s ** 3 - s ** 2) * v1)
+    return out
+
+
+def _runs(mask):
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    return zip(edges[::2], edges[1::2] - 1)
