@@ -15,7 +15,9 @@ frames:
   complete poses added to the KB); then, top-down, each gapped bone takes the rotation that
   best carries its rigid subtree - its descendants posed by their own keys - onto those joints
   (:func:`carry_subtrees`). Limb lengths are exact by construction;
-- ``auto`` (the default): per gap, half-way from ``interp`` to ``knn``, or ``knn``, or ``interp``,
+- ``auto`` (the default): per gap, half-way from ``interp`` to ``knn``, or ``knn``, or ``recall``
+  (subtrees carried onto the knowledge base's guess from the known joints alone: a KB that holds
+  the motion), or ``interp``,
   as copies of the gap - same bone, same length, placed where the bone is keyed - refilled by each
   say (:meth:`_Job.auto`);
 - ``slerp``: quaternion slerp between the rotations at the keys either side;
@@ -40,7 +42,7 @@ from .rig import basis_matrices, hermite_channels, interpolate_channels
 
 BONE_METHODS = ("auto", "knn", "interp", "hermite", "slerp", "positions")
 #: what ``auto`` chooses from, per gap
-AUTO_CANDIDATES = ("interp", "half", "knn")
+AUTO_CANDIDATES = ("interp", "half", "knn", "recall")
 NEEDS_KB = ("auto", "knn", "positions")
 #: ``auto`` takes ``knn`` for a gap where its error on the gap's copies is below this share of
 #: interpolation's (and below ``half``'s), interpolation where ``half``'s is above ``DEMOTE``
@@ -211,6 +213,7 @@ class _Job:
         return targets
 
     def knn(self, basis, gaps):
+        """Gapped bones carried onto the local models' joints near ``basis``."""
         return carry_subtrees(self.rig, basis, gaps, self.refine(basis, gaps), self.moves,
                               self.below)
 
@@ -246,6 +249,11 @@ class _Job:
         if {"knn", "half"} & set(names):
             out["knn"] = self.knn(self.hermite(channels, location, gaps), self.for_kb(gaps))
             out["half"] = halfway(out["interp"], out["knn"], gaps)
+        if "recall" in names:
+            fillable = self.for_kb(gaps)
+            out["recall"] = carry_subtrees(self.rig, out["interp"], fillable,
+                                           self.predict(out["interp"], fillable), self.moves,
+                                           self.below, stay=0.0)
         return out
 
     def auto(self, channels, location, gaps):
@@ -273,12 +281,13 @@ class _Job:
             owner = np.array([c[0] for c in copies])
             for i in np.unique(owner):
                 score = {}
-                for name in ("half", "knn"):
+                for name in ("half", "knn", "recall"):
                     ratio = np.log((errors[name] + floor) / (errors["interp"] + floor))
                     score[name] = ((ratio[owner == i].sum() + SHRINK * ratio.mean())
                                    / ((owner == i).sum() + SHRINK))
-                if score["knn"] < min(score["half"], np.log(PROMOTE)):
-                    choice[i] = "knn"
+                strong = min(("knn", "recall"), key=score.get)
+                if score[strong] < min(score["half"], np.log(PROMOTE)):
+                    choice[i] = strong
                 elif score["half"] > np.log(DEMOTE):
                     choice[i] = "interp"
         counts = {name: choice.count(name) for name in AUTO_CANDIDATES if choice.count(name)}
