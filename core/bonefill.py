@@ -104,8 +104,7 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     gaps = np.asarray(gaps, dtype=bool)
     if gaps.shape != channels.shape[:2]:
         raise GapFillError(f"gaps have shape {gaps.shape}, the take {channels.shape[:2]}")
-    moves = (np.array([p < 0 for p in rig.parents]) if moves is None
-             else np.asarray(moves, dtype=bool))
+    moves = rig.roots if moves is None else np.asarray(moves, dtype=bool)
     job = _Job(rig, fps, kb, moves, np.eye(4) if to_metres is None else np.asarray(to_metres),
                settings, progress or (lambda fraction, message: None), should_cancel,
                report or (lambda message: None))
@@ -134,7 +133,11 @@ class _Job:
         self.progress, self.should_cancel, self.report = progress, should_cancel, report
         self.below = rig.placed_by()
         # a moving bone places its own head (heads rigs; a tails rig's root joint is its head)
-        self.own = moves & np.array([rig.lengths is None or p < 0 for p in rig.parents])
+        self.own = moves & (rig.roots if rig.lengths is not None else True)
+
+    def moved_by(self, b):
+        """(joints,) bool: the joints bone ``b`` moves (below it, and its own where it moves)."""
+        return self.below[b] | (self.own & (np.arange(len(self.own)) == b))
 
     def unknown(self, gaps):
         """(frames, joints) joints the gaps leave unknown."""
@@ -169,7 +172,7 @@ class _Job:
         frames = np.arange(len(gaps))
         for b, a, e in gap_runs(gaps):
             away = np.minimum(frames[a:e + 1] - a + 1, e + 1 - frames[a:e + 1]) / self.fps
-            joints = self.below[b] | (self.own & (np.arange(len(self.own)) == b))
+            joints = self.moved_by(b)
             doubt[a:e + 1, joints] = np.maximum(doubt[a:e + 1, joints],
                                                 GUESS_SPEED * away[:, None])
         # also model a frame either side of each gap: the model's offset from the keys there
@@ -219,9 +222,7 @@ class _Job:
 
     def positions(self, basis, gaps):
         targets = self.predict(basis, gaps)
-        known = self.world(basis) @ np.linalg.inv(self.to_metres)[:3, :3].T \
-            + np.linalg.inv(self.to_metres)[:3, 3]
-        targets = np.where(np.isnan(targets), known, targets)
+        targets = np.where(np.isnan(targets), self.rig.joints(basis), targets)
         handles = (child_handles(self.rig.rest, self.rig.parents) if self.rig.lengths is None
                    else tail_handles(self.rig.lengths, self.rig.parents))
         out, _ = solve_pose(self.rig.rest, self.rig.parents, basis, targets, gaps,
@@ -231,7 +232,7 @@ class _Job:
     def for_kb(self, gaps):
         """The gaps the knowledge base can fill: not those of root bones (it holds poses about
         the root, not where the body is)."""
-        roots = np.array([p < 0 for p in self.rig.parents])
+        roots = self.rig.roots
         if (gaps & roots).any():
             self.report("gaps of the root bone are interpolated (the knowledge base knows poses, "
                         "not where the body goes)")
@@ -309,7 +310,7 @@ class _Job:
         world = self.world(basis)
         out = np.empty(len(copies))
         for i, (_, b, start, length) in enumerate(copies):
-            joints = self.below[b] | (self.own & (np.arange(len(self.own)) == b))
+            joints = self.moved_by(b)
             diff = world[start:start + length, joints] - truth[start:start + length, joints]
             out[i] = np.nansum(diff ** 2)
         return out

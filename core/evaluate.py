@@ -261,12 +261,12 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
                 basis = fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method,
                                    settings=KnnSettings(k=None if k is None else min(k, kb.size)))
                 seconds = time.perf_counter() - start
-                err = np.linalg.norm(rig.joints(basis) - true_joints, axis=2)[unknown]
+                dist = np.linalg.norm(rig.joints(basis) - true_joints, axis=2)
+                err = dist[unknown]
                 rel = np.einsum("fbji,fbjk->fbik", basis[..., :3, :3], truth[..., :3, :3])[gaps]
                 angle = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2,
                                                      -1, 1)))
-                per_gap = np.linalg.norm(rig.joints(basis) - true_joints, axis=2)
-                gap_mm = [float(1000 * np.sqrt((per_gap[a:e + 1, below[b]] ** 2).mean()))
+                gap_mm = [float(1000 * np.sqrt((dist[a:e + 1, below[b]] ** 2).mean()))
                           for b, a, e in gap_runs(gaps)]
                 results.append({"method": method, "setting": label, "test": Path(test).name,
                                 "rmse_missing_mm": float(1000 * np.sqrt((err ** 2).mean())),

@@ -451,12 +451,23 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
     return motion.replace(positions=out, filled=filled)
 
 
+def _kb_index(kb, common, settings):
+    """The search index over the knowledge base's ``common`` points (no copy when they are all
+    of its points, in order) and the settings with K resolved (None: DEFAULT_K or the KB size)."""
+    if settings.k is None:
+        settings = replace(settings, k=min(DEFAULT_K, kb.size))
+    elif settings.k > kb.size:
+        raise GapFillError(f"K = {settings.k} is larger than the knowledge base ({kb.size} poses)")
+    cols = [kb.names.index(n) for n in common]
+    poses = kb.poses if cols == list(range(len(kb.names))) else kb.poses[:, cols]
+    return KBIndex(poses, settings.device), settings
+
+
 def _fill_piece(motion, kb, settings, progress, should_cancel, report):
     """:func:`fill_knn` of one piece."""
     common, lacking = match_names(kb, motion.names)
     if lacking:
         report(f"not in the knowledge base, left unfilled: {', '.join(lacking)}")
-    kb_cols = [kb.names.index(n) for n in common]
     reference = kb.reference_for(common)
     q_index = [motion.names.index(n) for n in common]
     pos = motion.positions[:, q_index]
@@ -465,13 +476,8 @@ def _fill_piece(motion, kb, settings, progress, should_cancel, report):
         return motion
     if not (~missing).any():
         raise GapFillError("every sample is missing: nothing to fill from")
-    if settings.k is None:
-        settings = replace(settings, k=min(DEFAULT_K, kb.size))
-    elif settings.k > kb.size:
-        raise GapFillError(f"K = {settings.k} is larger than the knowledge base ({kb.size} poses)")
+    index, settings = _kb_index(kb, common, settings)
     name_to = {nm: i for i, nm in enumerate(common)}
-    index = KBIndex(kb.poses if kb_cols == list(range(len(kb.names))) else kb.poses[:, kb_cols],
-                    settings.device)
     limbs = np.asarray([(name_to[kb.names[a]], name_to[kb.names[b]]) for a, b in kb.limbs
                         if kb.names[a] in name_to and kb.names[b] in name_to], dtype=np.int64)
     limbs = limbs.reshape(-1, 2)
@@ -654,9 +660,7 @@ def soft_poses(positions, names, uncertainty, kb, fps, settings=KnnSettings(), f
     if not len(rows):
         return out
     reference = kb.reference_for(common)
-    index = KBIndex(kb.poses[:, [kb.names.index(n) for n in common]], settings.device)
-    if settings.k is None:
-        settings = replace(settings, k=min(DEFAULT_K, kb.size))
+    index, settings = _kb_index(kb, common, settings)
     sub = pos[:, cols]
     root, angle = frames_of(sub, reference, reference_template(index.poses, reference))
     norm = normalize(sub[rows], root[rows], angle[rows])

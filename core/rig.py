@@ -66,14 +66,18 @@ class Rig:
         object.__setattr__(self, "rest", rest)
         object.__setattr__(self, "parents", tuple(int(p) for p in self.parents))
 
+    @property
+    def roots(self):
+        """(bones,) bool: the bones without a parent."""
+        return np.array([p < 0 for p in self.parents])
+
     def joints(self, basis):
         """Joint positions (frames, bones, 3) in armature space for basis matrices."""
         pose = forward(self.rest, self.parents, basis)
         if self.lengths is None:
             return pose[..., :3, 3].copy()
         tip = pose[..., :3, 3] + pose[..., :3, 1] * np.asarray(self.lengths)[:, None]
-        roots = np.array([p < 0 for p in self.parents])
-        tip[:, roots] = pose[..., :3, 3][:, roots]
+        tip[:, self.roots] = pose[..., :3, 3][:, self.roots]
         return tip
 
     def placed_by(self):
@@ -87,7 +91,7 @@ class Rig:
                 below[p, b] = True
                 p = self.parents[p]
         if self.lengths is not None:
-            below |= np.eye(n, dtype=bool) & np.array([p >= 0 for p in self.parents])[:, None]
+            below |= np.eye(n, dtype=bool) & ~self.roots[:, None]
         return below
 
 
