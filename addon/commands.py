@@ -7,7 +7,7 @@ import numpy as np
 
 from ..core.backend import DEVICES
 from ..core.demo import BONE_GAPS
-from ..core.fill import METHODS
+from ..core.fill import DEFAULT_METHOD, METHODS
 
 
 def add_commands(sub):
@@ -29,7 +29,7 @@ def add_arguments(parser, with_input=False):
     parser.add_argument("--output", "-o", help="where to save (default: <input>_filled.blend)")
     parser.add_argument("--overwrite", action="store_true",
                         help="allow saving over the input or an existing output")
-    parser.add_argument("--method", default="knn", choices=METHODS)
+    parser.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS)
     parser.add_argument("-K", type=int, default=0, help="neighbours per frame (0: automatic)")
     parser.add_argument("--max-gap", type=int, default=0, help="leave longer gaps unfilled")
     parser.add_argument("--no-suspects", action="store_true",

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.errors import GapFillError
+from ..core.fill import DEFAULT_METHOD
 from ..core.motion import gap_runs
 from ..core.suspect import find_suspects
 from . import bridge, prefs
@@ -173,7 +174,7 @@ class FillPlan:
     messages: list = field(default_factory=list)  # what the fill had to say
 
 
-def plan_fill(context, owners, only_active=False, method="knn", k=0, max_gap=0, kb=None,
+def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, max_gap=0, kb=None,
               device="auto"):
     """Read the takes and return ``(plans, work)``: ``work(progress, should_cancel)`` fills them
     on plain arrays and returns per plan the filled positions (None for armatures filled in

@@ -16,15 +16,23 @@ UNITS = (
     ("IN", "Inches", ""), ("CMU", "CMU units", "1/0.45 inch, the CMU ASF unit"),
 )
 METHOD_ITEMS = (
+    ("auto", "Automatic", "Markers: the knowledge base's fill blended, per point, with a "
+                          "rigid-body fill from the points that keep their distances to it, each "
+                          "weighted by how well it refills copies of the point's gaps. Armatures: "
+                          "only the gapped bones' rotations change, and only on gaps where the "
+                          "knowledge base refills copies of the gap better than Blender's own "
+                          "interpolation"),
     ("knn", "Knowledge base", "Markers: nearest poses in the knowledge base, local PCA and "
-                              "optimisation. Armatures: only the gapped bones' rotations change, "
-                              "and only on gaps where the knowledge base refills copies of the "
-                              "gap better than Blender's own interpolation"),
-    ("auto", "Knowledge base or spline", "Markers: per point, spline interpolation where it "
-                                         "refills copies of the point's gaps clearly better than "
-                                         "the knowledge base. Armatures: as Knowledge base"),
+                              "optimisation, alone. Armatures: as Automatic"),
+    ("rigid", "Rigid body", "Each missing point carried by the 3 points whose distance to it "
+                            "varies least (as Vicon Nexus / QTM rigid-body fill); no knowledge "
+                            "base"),
+    ("pattern", "Pattern", "The gap follows the trajectory of the point that moves most like it "
+                           "(as Vicon Nexus pattern fill); no knowledge base"),
     ("linear", "Linear", "Linear interpolation of joint positions, for comparison"),
     ("spline", "Spline", "Cubic spline interpolation, for comparison"),
+    ("local-spline", "Spline in the body's frame", "Cubic spline of each point with the root at "
+                                                   "the origin and the hips facing one way"),
     ("intercorrelation", "Marker intercorrelation", "PCA of the take itself (no knowledge base)"),
     ("pca", "Global PCA", "PCA of the knowledge base"),
 )
@@ -84,7 +92,7 @@ class MOCAP_GAPFILL_PG_scene(bpy.types.PropertyGroup):
 
     kb_path: StringProperty(name="Knowledge base", subtype="FILE_PATH",
                             description="Knowledge-base file (.npz) of clean motion")
-    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="knn")
+    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="auto")
     k: IntProperty(name="K", default=0, min=0, soft_max=16384,
                    description="Neighbours per frame (0: automatic, min(4096, poses))")
     max_gap: IntProperty(name="Max gap", default=0, min=0,

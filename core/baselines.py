@@ -8,7 +8,19 @@
   al. 2018), its coefficients fitted to the present points of each normalised frame;
 - ``intercorrelation``: PCA of the take itself (Gloersen & Federolf 2016): marker trajectories
   are centred and scaled, the principal components of the frames where all points are present
-  are fitted to the present coordinates of each incomplete frame (no training data needed).
+  are fitted to the present coordinates of each incomplete frame (no training data needed);
+- ``rigid``: rigid-body fill (Vicon Nexus "Rigid Body Fill", QTM "rigid body" fill): per missing
+  sample, the 3 points whose distance to it varied least while both were seen carry it from each
+  gap end by a best-fit rigid transform (Kabsch), the two estimates blended linearly across
+  the gap;
+- ``pattern``: pattern fill (Vicon Nexus "Pattern Fill"): the gap takes the shape of the donor
+  trajectory, seen across the whole gap, whose offset to the point varied least while both were
+  seen, offset-blended to the point's values at both gap ends;
+- ``local-spline``: cubic spline of each point in the body's own frame (root at the origin, hips
+  facing +X: the method's normalisation), turned back into the world.
+
+Samples that ``rigid`` and ``pattern`` have no donors for are interpolated linearly, as a user of
+those tools would do next.
 
 Every function takes positions (frames, points, 3) with NaN gaps and returns them filled; points
 missing in every frame stay NaN where a method has nothing to go on.
@@ -17,7 +29,11 @@ missing in every frame stay NaN where a method has nothing to go on.
 import numpy as np
 
 from .errors import GapFillError
-from .motion import interpolate_rows
+from .motion import gap_runs, interpolate_rows
+from .posing import best_rotation
+
+#: donors of a rigid-body fill
+RIGID_DONORS = 3
 
 
 def fill_linear(pos):
@@ -122,3 +138,134 @@ def fill_intercorrelation(pos, variance=0.99, iterations=30, tol=1e-6):
     out = m.copy()
     out[:, cols] = np.where(k, x, z * scale + mean)
     return out.reshape(pos.shape)
+
+
+def _pair_stats(pos, p, seen):
+    """For point ``p`` against every point: the standard deviation of their distance and the
+    total variance of their offset over the frames where both are seen (inf where fewer than
+    3 such frames, and for ``p`` itself)."""
+    both = seen & seen[:, p:p + 1]
+    count = both.sum(axis=0)
+    offset = np.where(both[..., None], pos - pos[:, p:p + 1], 0.0)
+    dist = np.linalg.norm(offset, axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean_d = dist.sum(axis=0) / count
+        dist_sd = np.sqrt(np.where(both, (dist - mean_d) ** 2, 0).sum(axis=0) / count)
+        mean_o = offset.sum(axis=0) / count[:, None]
+        offset_var = (np.where(both[..., None], (offset - mean_o) ** 2, 0).sum(axis=(0, 2))
+                      / count)
+    bad = count < 3
+    bad[p] = True
+    return np.where(bad, np.inf, dist_sd), np.where(bad, np.inf, offset_var)
+
+
+def _gap_ends(a, b, frames):
+    """The observed frames either side of a gap a..b (inclusive) that exist."""
+    return [t for t in (a - 1, b + 1) if 0 <= t < frames]
+
+
+def _end_weights(a, b, ends):
+    """(frames of the gap, ends) linear blending weights of the estimates from each end."""
+    if len(ends) == 1:
+        return np.ones((b - a + 1, 1))
+    w = (np.arange(a, b + 1) - ends[0]) / (ends[1] - ends[0])
+    return np.stack([1 - w, w], axis=1)
+
+
+def fill_rigid(pos, donors=RIGID_DONORS):
+    """Rigid-body fill: each missing sample carried by the ``donors`` steadiest partners seen at
+    its frame and at the gap's ends (see the module docstring)."""
+    return rigid_estimates(pos, donors)[0]
+
+
+def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None):
+    """:func:`fill_rigid` and, per sample it carried, the RMS spread (metres) of its donors'
+    distances to it: near 0 where the point rides on a rigid segment with them (NaN elsewhere).
+
+    ``weighted`` weighs each donor's fit by the inverse square of its spread. ``partners``:
+    positions (same shape, more of them seen) to choose the donors from, e.g. a take whose
+    gaps are hidden further to test the fill.
+    """
+    pos = np.asarray(pos, dtype=np.float64)
+    frames = len(pos)
+    seen = np.isfinite(pos[..., 0])
+    out = pos.copy()
+    spreads = np.full(seen.shape, np.nan)
+    stats = {}
+    for p, a, b in gap_runs(~seen):
+        ends = _gap_ends(a, b, frames)
+        if not ends:
+            continue
+        if p not in stats:
+            ref = pos if partners is None else np.asarray(partners, dtype=np.float64)
+            stats[p] = _pair_stats(ref, p, np.isfinite(ref[..., 0]))[0]
+        spread = stats[p]
+        order = np.array([q for q in np.argsort(spread) if np.isfinite(spread[q])
+                          and seen[ends, q].all()], dtype=np.int64)
+        if len(order) < donors:
+            continue
+        weights = _end_weights(a, b, ends)
+        ok = seen[a:b + 1][:, order]
+        # per frame, the steadiest donors seen there; frames sharing a donor set are fitted
+        # together
+        picks = {}
+        for i, row in enumerate(ok):
+            chosen = tuple(order[row][:donors])
+            if len(chosen) == donors:
+                picks.setdefault(chosen, []).append(i)
+        for chosen, rows in picks.items():
+            chosen, rows = list(chosen), np.array(rows)
+            w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(donors)
+            w = (w / w.sum())[:, None]
+            cur = pos[a + rows][:, chosen]  # (t, donors, 3)
+            c_cur = (cur * w).sum(axis=1)
+            estimate = 0.0
+            for k, t in enumerate(ends):
+                ref = pos[t, chosen]
+                c_ref = (ref * w).sum(axis=0)
+                rot, _ = best_rotation(np.broadcast_to((ref - c_ref) * np.sqrt(w), cur.shape),
+                                       (cur - c_cur[:, None]) * np.sqrt(w))
+                moved = np.einsum("fij,j->fi", rot, pos[t, p] - c_ref) + c_cur
+                estimate = estimate + weights[rows, k:k + 1] * moved
+            out[a + rows, p] = estimate
+            spreads[a + rows, p] = np.sqrt(np.mean(spread[chosen] ** 2))
+    return fill_linear(out), spreads
+
+
+def fill_pattern(pos):
+    """Pattern fill: each gap shaped like its steadiest donor's trajectory (see the module
+    docstring): ``F(t) = V_F(t) - V_D(t) + D(t)`` with ``V`` the straight line between a
+    trajectory's values at the gap's ends (the offset at the one end at a clip end)."""
+    pos = np.asarray(pos, dtype=np.float64)
+    frames = len(pos)
+    seen = np.isfinite(pos[..., 0])
+    out = pos.copy()
+    stats = {}
+    for p, a, b in gap_runs(~seen):
+        ends = _gap_ends(a, b, frames)
+        if not ends:
+            continue
+        if p not in stats:
+            stats[p] = _pair_stats(pos, p, seen)[1]
+        lo, hi = min(ends), max(ends)
+        usable = seen[lo:hi + 1].all(axis=0) & np.isfinite(stats[p])
+        if not usable.any():
+            continue
+        q = int(np.argmin(np.where(usable, stats[p], np.inf)))
+        weights = _end_weights(a, b, ends)
+        offsets = np.stack([pos[t, p] - pos[t, q] for t in ends])  # (ends, 3)
+        out[a:b + 1, p] = pos[a:b + 1, q] + weights @ offsets
+    return fill_linear(out)
+
+
+def fill_local_spline(pos, reference):
+    """Cubic spline of each point in the body's own frame (:mod:`.normalize`), back in the
+    world; ``reference`` is the point set's :class:`~.normalize.Reference`. Where no frame
+    shows the root and hips, the body has no frame: the spline in the world."""
+    from .normalize import denormalize, frames_of, normalize
+
+    try:
+        root, angle = frames_of(pos, reference)
+    except GapFillError:
+        return fill_spline(pos)
+    return denormalize(fill_spline(normalize(pos, root, angle)), root, angle)

@@ -41,6 +41,8 @@ from .recover import blend_into_gaps
 from .rig import basis_matrices, hermite_channels, interpolate_channels
 
 BONE_METHODS = ("auto", "knn", "interp", "hermite", "slerp", "positions")
+#: the methods that are not the project's own (``interp`` is Blender's own interpolation)
+BONE_BASELINES = ("interp", "hermite", "slerp")
 #: what ``auto`` chooses from, per gap
 AUTO_CANDIDATES = ("interp", "half", "knn", "recall")
 NEEDS_KB = ("auto", "knn", "positions")

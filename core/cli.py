@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import GapFillError
 from .backend import DEVICES
-from .fill import METHODS
+from .fill import BASELINES, DEFAULT_METHOD, METHODS
 from .io import READ_FORMATS, WRITE_FORMATS, read_motion, write_motion
 from .motion import UNIT_SCALES
 
@@ -172,9 +172,10 @@ def cmd_evaluate(args):
 
     progress = Progress(args.quiet)
     if args.protocol == "bones":
-        from .bonefill import BONE_METHODS
+        from .bonefill import BONE_BASELINES, BONE_METHODS
         from .evaluate import evaluate_bones
 
+        default, baselines = "auto", BONE_BASELINES
         unknown = sorted(set(args.methods or ()) - set(BONE_METHODS))
         if unknown:
             raise GapFillError(f"protocol bones takes the methods {', '.join(BONE_METHODS)}")
@@ -184,6 +185,7 @@ def cmd_evaluate(args):
                                  settings=args.settings, exclude=args.exclude_kb or (),
                                  progress=progress, report=_report)
     else:
+        default, baselines = DEFAULT_METHOD, BASELINES
         unknown = sorted(set(args.methods or ()) - set(METHODS))
         if unknown:
             raise GapFillError(f"unknown methods {', '.join(unknown)}")
@@ -191,11 +193,13 @@ def cmd_evaluate(args):
         results = evaluate(args.protocol, args.test, args.kb_sources, methods=methods,
                            fps=args.fps, seed=args.seed, k=args.k, skip_frames=args.skip_frames,
                            settings=args.settings, exclude=args.exclude_kb or (),
-                           progress=progress, report=_report)
+                           gap_sources=args.gap_sources, progress=progress, report=_report)
     progress.done()
     print(table(results))
     if args.json:
-        payload = {"protocol": args.protocol, "fps": args.fps, "seed": args.seed, "k": args.k,
+        payload = {"protocol": args.protocol, "default_method": default,
+                   "baselines": [m for m in baselines if m in methods], "fps": args.fps,
+                   "seed": args.seed, "k": args.k,
                    "tests": [str(t) for t in args.test],
                    "kb_sources": [str(s) for s in args.kb_sources], "results": results}
         Path(args.json).write_text(json.dumps(payload, indent=1))
@@ -258,9 +262,11 @@ def build_parser(extra=None):
     p.add_argument("-k", "--kb", help="knowledge base (.npz) for the knn and pca methods")
     p.add_argument("-o", "--output", required=True,
                    help=f"{', '.join(WRITE_FORMATS)} (chosen by extension)")
-    p.add_argument("--method", default="knn", choices=METHODS,
-                   help="knn (default): the knowledge-base method; auto: per point knn or "
-                        "spline, whichever refills copies of its gaps clearly better")
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS,
+                   help="auto (default): the knowledge-base fill blended per point with a "
+                        "rigid-body fill, by how well each refills copies of the point's gaps; "
+                        "knn: the knowledge base alone; rigid, pattern: the Vicon Nexus / QTM "
+                        "fills; the rest for comparison")
     p.add_argument("-K", dest="k", type=int,
                    help="neighbours per frame (knn; default 4096, or the KB size if smaller)")
     p.add_argument("--max-gap", type=int, metavar="FRAMES",
@@ -275,8 +281,9 @@ def build_parser(extra=None):
 
     p = sub.add_parser("evaluate", help="accuracy of the methods on punched gaps in real data")
     p.add_argument("--protocol", required=True,
-                   choices=["joints", "markers", "bodyparts", "bones"],
-                   help="bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
+                   choices=["joints", "markers", "bodyparts", "realgaps", "bones"],
+                   help="realgaps: the gaps of real captures (--gap-sources) on complete takes; "
+                        "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
                         "rate; methods auto, knn, interp, slerp, positions")
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")
     p.add_argument("--kb-sources", nargs="+", required=True, metavar="PATH",
@@ -285,6 +292,8 @@ def build_parser(extra=None):
                    help=f"some of {', '.join(METHODS)} (default: all of the protocol's)")
     p.add_argument("--settings", nargs="+", metavar="LABEL",
                    help="only these settings, e.g. 'm=6,l=60' 'rate=0.2'")
+    p.add_argument("--gap-sources", nargs="+", default=(), metavar="FILE",
+                   help="realgaps: captures whose gaps are transplanted by point name")
     p.add_argument("--fps", type=float, default=60.0,
                    help="evaluation frame rate (default 60; for bones the KB's rate, the takes "
                         "keep their own)")

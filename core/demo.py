@@ -15,7 +15,7 @@ import numpy as np
 
 from . import synth
 from .evaluate import rmse_mm
-from .fill import fill
+from .fill import DEFAULT_METHOD, fill
 from .io import write_motion
 from .kb import kb_from_motions
 from .motion import gap_runs
@@ -28,7 +28,7 @@ BONE_GAPS = (("LeftForeArm", 60, 159), ("RightLeg", 120, 199), ("Spine1", 300, 3
 #: (marker, first, last) samples removed
 MARKER_GAPS = (("LELB", 40, 129), ("LWRA", 90, 169), ("RKNE", 150, 229), ("RANK", 170, 249),
                ("RTOE", 200, 279), ("LFHD", 0, 69))
-COMPARE = ("knn", "linear", "spline")
+COMPARE = (DEFAULT_METHOD, "knn", "rigid", "linear", "spline")
 
 
 def demo_takes():
@@ -75,7 +75,7 @@ def run_demo(outdir="out", progress=None, report=print):
             result = fill(query, method, kb=kb, progress=progress)
             scores[(label, method)] = rmse_mm(result, truth, miss)
             report(f"  {method:7s} RMSE over missing samples {scores[(label, method)]:7.1f} mm")
-            if method == "knn":
+            if method == DEFAULT_METHOD:
                 filled = result
                 if label == "markers":
                     out = _write_c3d_or_npz(result, outdir / "demo_markers_filled.c3d")

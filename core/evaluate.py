@@ -4,7 +4,10 @@ Protocols:
 - ``joints``: in each interval of ``l`` frames, ``m`` random points are removed for the whole
   interval (m in {3, 6}, l in {15, 30, 60, 90, 120} at the evaluation frame rate);
 - ``markers``: in each 60-frame interval a fraction (10, 20, 30 %) of the points is removed;
-- ``bodyparts``: a whole limb or half of the body is removed for the middle half of the clip.
+- ``bodyparts``: a whole limb or half of the body is removed for the middle half of the clip;
+- ``realgaps``: the gaps a real capture has (``gap_sources``: takes with gaps of their own, e.g.
+  CMU 01_01.c3d), transplanted by point name onto the complete test take, the source's mask
+  repeated in time where the test take is longer, so gap lengths and co-occurrence are real.
 
 The knowledge base is built from the sources without any file of the test trial's subject.
 Errors are RMSE in millimetres over the missing entries and over all entries (the paper's).
@@ -84,18 +87,40 @@ def punch_gaps(n_frames, n_points, protocol, setting, rng, names=None):
         if not pts:
             raise GapFillError(f"no points of {setting} found by name")
         miss[n_frames // 4: 3 * n_frames // 4, pts] = True
+    elif protocol == "realgaps":
+        miss = real_gaps(setting, names, n_frames)
     else:
         raise GapFillError(f"unknown protocol {protocol!r}")
     return miss
 
 
-def settings_of(protocol):
+def real_gaps(source, names, n_frames):
+    """The gap mask of the motion ``source`` (at the take's rate) for the points ``names`` (by
+    name) over ``n_frames`` frames: the source repeated in time over a longer take, folded onto
+    a shorter one (source frame ``t`` lands on ``t % n_frames``), so every real gap is there."""
+    shared = [n for n in names if n in source.names]
+    miss = np.zeros((n_frames, len(names)), dtype=bool)
+    t = np.arange(max(n_frames, source.n_frames))
+    for name in shared:
+        np.logical_or.at(miss[:, names.index(name)], t % n_frames,
+                         source.missing[t % source.n_frames, source.names.index(name)])
+    if not miss.any():
+        raise GapFillError(f"{Path(source.source).name} has no gaps on the points it shares "
+                           f"with the take ({len(shared)} of {len(names)} names shared)")
+    return miss
+
+
+def settings_of(protocol, gap_sources=()):
     if protocol == "joints":
         return [(f"m={m},l={l}", (m, l)) for m, l in JOINT_SETTINGS]
     if protocol == "markers":
         return [(f"rate={r}", r) for r in MARKER_RATES]
     if protocol == "bodyparts":
         return [(f"part={p}", p) for p in BODY_PARTS]
+    if protocol == "realgaps":
+        if not gap_sources:
+            raise GapFillError("protocol realgaps needs takes with real gaps (--gap-sources)")
+        return [(f"gaps={Path(g).name.split('.')[0]}", g) for g in gap_sources]
     raise GapFillError(f"unknown protocol {protocol!r}")
 
 
@@ -125,20 +150,22 @@ def kb_without(kb, subject):
 
 
 def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=None,
-             skip_frames=0, settings=None, exclude=(), progress=None, report=None):
+             skip_frames=0, settings=None, exclude=(), gap_sources=(), progress=None,
+             report=None):
     """Run a protocol; a list of result dicts (method, setting, test, rmse_missing_mm, ...)."""
     report = report or (lambda message: None)
+    chosen = [s for s in settings_of(protocol, gap_sources)
+              if settings is None or s[0] in settings]
+    if protocol == "realgaps":  # the gap sources' masks, read once
+        chosen = [(label, _at_rate(read_motion(path, skip_frames=skip_frames), fps))
+                  for label, path in chosen]
     full_kb = build_kb(kb_sources, fps=fps, skip_frames=skip_frames, exclude=exclude,
                        report=report)
     results = []
-    chosen = settings_of(protocol) if settings is None else [
-        s for s in settings_of(protocol) if s[0] in settings]
     total = len(tests) * len(chosen) * len(methods)
     done = 0
     for test in tests:
-        truth = read_motion(test, skip_frames=skip_frames)
-        truth = truth.replace(positions=resample(truth.positions, truth.fps, fps), fps=fps,
-                              filled=None)
+        truth = _at_rate(read_motion(test, skip_frames=skip_frames), fps)
         common = [n for n in truth.names if n in full_kb.names]
         truth = truth.select(common)
         if truth.missing.any():
@@ -164,6 +191,11 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
                 if progress:
                     progress(done / total, f"{Path(test).name} {label} {method}")
     return results
+
+
+def _at_rate(motion, fps):
+    return motion.replace(positions=resample(motion.positions, motion.fps, fps), fps=fps,
+                          filled=None)
 
 
 def table(results):

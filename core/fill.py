@@ -7,18 +7,23 @@ from .errors import GapFillError
 from .kb import match_names
 from .motion import gap_runs
 
-METHODS = ("knn", "auto", "linear", "spline", "svt", "pca", "intercorrelation")
+METHODS = ("knn", "auto", "linear", "spline", "local-spline", "rigid", "pattern", "svt", "pca",
+           "intercorrelation")
+#: what ``fill`` (the command, the add-on) uses unless told otherwise
+DEFAULT_METHOD = "auto"
+#: the methods that are not the project's own (what users already have, and the literature's)
+BASELINES = tuple(m for m in METHODS if m not in ("knn", "auto"))
 NEEDS_KB = ("knn", "auto", "pca")
-#: what ``auto`` chooses between, per point
-AUTO_CANDIDATES = ("knn", "spline")
 #: validation gaps per point for ``auto``
 AUTO_PROBES = 3
-#: ``auto`` leaves a point to knn unless another candidate's error on its copies is below this
-#: share of knn's (a copy is a small sample; the KB method is the better bet when close)
-AUTO_MARGIN = 0.5
+#: donors of ``auto``'s rigid-body estimate
+AUTO_DONORS = 3
+#: ``auto`` lets rigid partners alone carry a point whose copies they refill better than the
+#: knowledge base and within this RMS error (metres); the knowledge base then sees it as observed
+AUTO_RIGID_FIRST = 0.005
 
 
-def fill(motion, method="knn", kb=None, settings=None, progress=None, should_cancel=None,
+def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
          report=None):
     """Fill the gaps of a motion with the named method.
 
@@ -57,8 +62,14 @@ def fill(motion, method="knn", kb=None, settings=None, progress=None, should_can
         done = baselines.fill_global_pca(sub.positions, kb.poses[:, kb_cols],
                                          kb.reference_for(common))
         index = [motion.names.index(n) for n in common]
+    elif method == "local-spline":
+        from .normalize import find_reference
+
+        done = baselines.fill_local_spline(motion.positions, find_reference(motion.names))
+        index = list(range(motion.n_points))
     else:
         func = {"linear": baselines.fill_linear, "spline": baselines.fill_spline,
+                "rigid": baselines.fill_rigid, "pattern": baselines.fill_pattern,
                 "svt": baselines.fill_svt, "intercorrelation": baselines.fill_intercorrelation}
         done = func[method](motion.positions)
         index = list(range(motion.n_points))
@@ -78,55 +89,72 @@ def _with_fill(motion, out):
 
 
 def _fill_auto(motion, kb, settings, progress, should_cancel, report):
-    """Per point, the better of the knowledge-base fill and spline interpolation on this take.
+    """The knowledge-base fill and a rigid-body fill, blended per point by how well each refills
+    copies of the point's gaps on this take.
 
-    Each gap is copied (same points, same length) to nearby frames where its point is observed;
-    both candidates fill those copies, and a point's gaps go to interpolation only where its
-    error on the copies is below :data:`AUTO_MARGIN` of the knowledge base's (the knowledge base
-    where a point has no copy; interpolation for points the knowledge base lacks). The KB method
-    wins where the motion is fast or the gap long, interpolation where the motion is slow and the
-    KB holds no similar poses.
+    Each gap is copied (same points, same length, or shorter where the take has no room) to
+    nearby frames where its point is observed; both fill those copies, and a point's gaps take
+    ``w * knn + (1 - w) * rigid`` with ``w = e_rigid / (e_knn + e_rigid)`` (``e``: mean squared
+    error on the point's copies: inverse-variance weights). Rigid partners go first: a point
+    they refill better than the knowledge base and within :data:`AUTO_RIGID_FIRST` is theirs
+    alone, and the knowledge base's fill of the others sees it as observed. Points without
+    copies keep the knowledge base's fill; samples with no rigid donors (or points the knowledge
+    base lacks) the one method that has them. Rigid partners win on points that ride on a
+    segment (head, pelvis, a hand's fingers), the knowledge base where whole segments or long
+    stretches are gone. The donors are chosen and weighted by how steady their distance to the
+    point is over the take (:func:`~.baselines.rigid_estimates`).
     """
+    from .baselines import rigid_estimates
+    from .recover import KnnSettings, fill_knn
+
     report = report or (lambda message: None)
     progress = progress or (lambda fraction, message: None)
+    settings = settings or KnnSettings()
     missing = motion.missing
     probe = validation_gaps(missing, AUTO_PROBES)
 
-    def run(name, target, p0, p1):
-        def step(fraction, message):
-            progress(p0 + (p1 - p0) * fraction, message)
+    def carried(target):
+        rigid, spread = rigid_estimates(target.positions, AUTO_DONORS, weighted=True,
+                                        partners=motion.positions)
+        return np.where(np.isnan(spread)[..., None], np.nan, rigid)
 
-        return fill(target, name, kb=kb, settings=settings, progress=step,
-                    should_cancel=should_cancel).positions
-
-    choice = np.zeros(motion.n_points, dtype=int)  # index into AUTO_CANDIDATES
+    weight = np.ones(motion.n_points)  # the knowledge base's share, per point
     if probe.any():
         hidden = motion.replace(positions=np.where(probe[..., None], np.nan, motion.positions))
-        errors = []
-        for i, name in enumerate(AUTO_CANDIDATES):
-            out = run(name, hidden, 0.5 * i / len(AUTO_CANDIDATES),
-                      0.5 * (i + 1) / len(AUTO_CANDIDATES))
-            sq = np.sum((out - motion.positions) ** 2, axis=2)
-            # a candidate that leaves a copy unfilled (a point the KB lacks) cannot win there
-            errors.append(np.where(probe, np.nan_to_num(sq, nan=np.inf), 0.0).sum(axis=0))
-        errors = np.array(errors)
-        errors[1:] /= AUTO_MARGIN  # knn (index 0) keeps a point unless clearly beaten
+        knn = fill_knn(hidden, kb, settings, progress=lambda f, m: progress(0.5 * f, m),
+                       should_cancel=should_cancel).positions
+        errors = [np.where(probe, np.sum((out - motion.positions) ** 2, axis=2), 0).sum(axis=0)
+                  for out in (knn, carried(hidden))]
+        # a method that left some copy unfilled is not weighed against the other
+        e_knn, e_rigid = (np.nan_to_num(e, nan=np.inf) for e in errors)
         seen = probe.any(axis=0)
-        choice[seen] = np.argmin(errors[:, seen], axis=0)
-    out = None
-    for i, name in enumerate(AUTO_CANDIDATES):  # the first (knn) fills every point
-        chosen = choice == i
-        if out is not None and not chosen.any():
-            continue
-        result = run(name, motion, 0.5 + 0.5 * i / len(AUTO_CANDIDATES),
-                     0.5 + 0.5 * (i + 1) / len(AUTO_CANDIDATES))
-        out = result if out is None else np.where(chosen[None, :, None], result, out)
+        with np.errstate(invalid="ignore"):
+            share = e_rigid / (e_knn + e_rigid)
+        weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
+                                np.isfinite(e_knn[seen]).astype(float))
+        # points their rigid partners carry alone
+        first = seen & (e_rigid < e_knn) & (e_rigid < AUTO_RIGID_FIRST ** 2 * probe.sum(axis=0))
+        weight[first] = 0.0
+    rigid = carried(motion)
+    ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
+    # the knowledge base sees those as observed (they are never another point's donors: an
+    # estimate carried on would add its error to the next)
+    given = motion.replace(positions=np.where(ahead[..., None], rigid, motion.positions))
+    start = 0.5 if probe.any() else 0.0
+    knn = fill_knn(given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
+                   should_cancel=should_cancel).positions
+    w = np.broadcast_to(weight[None], missing.shape).copy()
+    w[np.isnan(rigid[..., 0])] = 1.0
+    w[np.isnan(knn[..., 0])] = 0.0
+    out = np.where(np.isnan(knn), 0, knn) * w[..., None] + \
+        np.where(np.isnan(rigid), 0, rigid) * (1 - w[..., None])
+    out[np.isnan(knn[..., 0]) & np.isnan(rigid[..., 0])] = np.nan
     gappy = missing.any(axis=0)
-    for i, name in enumerate(AUTO_CANDIDATES):
-        points = [motion.names[p] for p in np.flatnonzero(gappy & (choice == i))]
-        if points:
-            report(f"auto: {name} for {len(points)} points ({', '.join(points[:8])}"
-                   f"{'...' if len(points) > 8 else ''})")
+    rigidly = gappy & (weight < 0.5)
+    report(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped points "
+           f"more than the knowledge base"
+           + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
+              f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
     return _with_fill(motion, out)
 
 
@@ -134,27 +162,32 @@ def validation_gaps(missing, per_point=3, margin=10):
     """Copies of the gaps where their points are observed: for each gap of each point, the
     nearest shift (by at least the gap's length plus ``margin``) that lands on observed frames
     with an observed frame on either side, at most ``per_point`` per point. A gap of several
-    points at the same frames lands at the same shift for all of them when it can."""
-    frames, points = missing.shape
+    points at the same frames lands at the same shift for all of them when it can. Where a
+    take has no room for a full-length copy of a point's gaps, half (then a quarter) of the
+    length is tried, down to 4 frames."""
     probe = np.zeros_like(missing)
     runs = sorted(gap_runs(missing), key=lambda r: (r[1], r[2], r[0]))
-    count = np.zeros(points, dtype=int)
-    for p, a, b in runs:
-        if count[p] >= per_point:
-            continue
-        length = b - a + 1
-        step = length + margin
-        for k in range(1, frames // max(step, 1) + 2):
-            for start in (a + k * step, a - k * step):
-                lo, hi = start - 1, start + length + 1
-                if lo < 0 or hi > frames:
-                    continue
-                if missing[lo:hi, p].any() or probe[lo:hi, p].any():
-                    continue
-                probe[start:start + length, p] = True
-                count[p] += 1
-                break
-            else:
+    count = np.zeros(missing.shape[1], dtype=int)
+    for shrink in (1, 2, 4):
+        for p, a, b in runs:
+            length = (b - a + 1) // shrink
+            if count[p] >= per_point or (shrink > 1 and count[p]) or length < min(4, b - a + 1):
                 continue
-            break
+            count[p] += _copy_gap(missing, probe, p, a, length, margin)
     return probe
+
+
+def _copy_gap(missing, probe, p, a, length, margin):
+    """Mark in ``probe`` the copy of point ``p``'s gap (starting at ``a``, ``length`` frames)
+    at the nearest start at least ``length + margin`` frames away whose frames, and one either
+    side, are observed and not yet a copy; whether there was one."""
+    busy = np.concatenate([[0], np.cumsum(missing[:, p] | probe[:, p])])
+    starts = np.arange(1, len(missing) - length)
+    free = busy[starts + length + 1] - busy[starts - 1] == 0
+    away = np.abs(starts - a) >= length + margin
+    starts = starts[free & away]
+    if not len(starts):
+        return False
+    start = starts[np.argmin(np.abs(starts - a))]
+    probe[start:start + length, p] = True
+    return True

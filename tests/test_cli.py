@@ -102,12 +102,41 @@ def test_evaluate_writes_json(data_dir, tmp_path):
     assert r.returncode == 0, r.stderr
     payload = json.loads(out.read_text())
     assert payload["protocol"] == "markers"
+    assert payload["default_method"] == "auto" and payload["baselines"] == ["linear"]
     rows = payload["results"]
     assert {(row["method"], row["setting"], row["test"]) for row in rows} == {
         ("knn", "rate=0.1", "85_02.c3d"), ("linear", "rate=0.1", "85_02.c3d")}
     for row in rows:
         assert row["rmse_missing_mm"] > row["rmse_all_mm"] > 0 and row["seconds"] > 0
     assert "rate=0.1" in r.stdout
+
+
+def test_evaluate_real_gaps(data_dir, tmp_path):
+    """realgaps: the gaps 01_01.c3d really has (RBAC, its last 30 frames), by name, on other
+    takes of the same marker set."""
+    from mocap_gapfill.core.evaluate import real_gaps
+
+    source = read_motion(data_dir / "cmu/c3d/01_01.c3d")
+    take = read_motion(data_dir / "cmu/c3d/85_02.c3d")
+    miss = real_gaps(source, list(take.names), 3 * source.n_frames)
+    rbac = take.names.index("RBAC")
+    assert miss.sum() == 3 * 30 and miss[:, rbac].sum() == 3 * 30  # repeated in time
+    assert miss[source.n_frames - 30:source.n_frames, rbac].all()
+    folded = real_gaps(source, list(take.names), take.n_frames)  # a shorter take: folded
+    start = (source.n_frames - 30) % take.n_frames
+    assert folded.sum() == 30 and folded[start:start + 30, rbac].all()
+    out = tmp_path / "real.json"
+    c3d = data_dir / "cmu/c3d"
+    r = cli("evaluate", "--protocol", "realgaps", "--gap-sources", c3d / "01_01.c3d", "--fps",
+            "120", "--methods", "rigid", "linear", "--test", c3d / "85_02.c3d",
+            "--kb-sources", data_dir / "cmu/c3d/02_05.c3d", "--json", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    rows = {row["method"]: row for row in json.loads(out.read_text())["results"]}
+    assert set(rows) == {"rigid", "linear"} and rows["rigid"]["setting"] == "gaps=01_01"
+    assert rows["rigid"]["rmse_missing_mm"] < rows["linear"]["rmse_missing_mm"]
+    r = cli("evaluate", "--protocol", "realgaps", "--test", data_dir / "cmu/c3d/06_01.c3d",
+            "--kb-sources", data_dir / "cmu/c3d/02_05.c3d", "--quiet")
+    assert r.returncode == 2 and "--gap-sources" in r.stderr and "Traceback" not in r.stderr
 
 
 def test_ctrl_c_stops_cleanly_and_writes_nothing(data_dir, tmp_path):
@@ -144,10 +173,12 @@ def test_demo_is_the_main_job(tmp_path):
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     rows = re.findall(r"^\s+(\w+)\s+RMSE over missing samples\s+([\d.]+) mm", r.stdout, re.M)
-    skeleton, markers = dict(rows[:3]), dict(rows[3:])
+    skeleton, markers = dict(rows[:5]), dict(rows[5:])
     for scores in (skeleton, markers):
-        assert set(scores) == {"knn", "linear", "spline"}
-        assert float(scores["knn"]) < 0.2 * min(float(scores["linear"]), float(scores["spline"]))
+        scores = {method: float(value) for method, value in scores.items()}
+        assert set(scores) == {"auto", "knn", "rigid", "linear", "spline"}
+        assert scores["auto"] < 0.2 * min(scores["linear"], scores["spline"])
+        assert scores["auto"] <= 1.1 * min(scores["knn"], scores["rigid"])
     for name in ("kb_skeleton.npz", "kb_markers.npz", "demo_markers.svg",
                  "demo_markers_filled.c3d"):
         assert (tmp_path / name).is_file(), name

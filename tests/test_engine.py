@@ -7,7 +7,7 @@ import pytest
 
 from mocap_gapfill.core.errors import GapFillError, ParseError
 from mocap_gapfill.core.evaluate import kb_without, punch_gaps, rmse_mm, subject_of, with_gaps
-from mocap_gapfill.core.fill import METHODS, fill
+from mocap_gapfill.core.fill import BASELINES, DEFAULT_METHOD, METHODS, fill
 from mocap_gapfill.core.io import read_motion
 from mocap_gapfill.core.kb import build_kb, load_kb, resample
 from mocap_gapfill.core.normalize import find_reference, frames_of, normalize
@@ -118,15 +118,14 @@ def test_search_equals_the_exact_oracle(daz_kb):
         KBIndex(daz_kb.poses[:100]).search(queries, present, 101)
 
 
-def test_knn_beats_every_baseline_and_keeps_observations(daz_kb, walk):
+def test_default_beats_every_baseline_and_keeps_observations(daz_kb, walk):
     kb = kb_without(daz_kb, subject_of("07_05"))
     assert not any(subject_of(s) == "07" for s in np.array(kb.sources)[np.unique(kb.source_index)])
     miss = punch_gaps(walk.n_frames, walk.n_points, "joints", (6, 60), np.random.default_rng(3))
     query = with_gaps(walk, miss)
     scores = {m: rmse_mm(fill(query, m, kb=kb), walk, miss) for m in METHODS}
-    best_baseline = min(v for m, v in scores.items() if m != "knn")
-    assert scores["knn"] < best_baseline, scores
-    out = fill(query, "knn", kb=kb)
+    assert scores[DEFAULT_METHOD] < min(scores[m] for m in BASELINES), scores
+    out = fill(query, kb=kb)
     observed = ~miss
     np.testing.assert_array_equal(out.positions[observed], walk.positions[observed])
     np.testing.assert_array_equal(out.filled, miss)
@@ -244,33 +243,34 @@ def test_top_k_selection_is_exact_for_every_k(daz_kb):
                                           np.sort(matrix, axis=1)[:, :k])
 
 
-def test_auto_takes_the_better_method_per_point(daz_kb, data_dir):
-    """auto = per point the better of knn and spline on copies of the gaps: close to the better
-    of the two on a slow take with a bone gap (spline wins) and on a jump turn (knn wins)."""
+def test_auto_blends_knowledge_base_and_rigid_partners(daz_kb, data_dir):
+    """auto = per point knn and a rigid-body fill weighted by their errors on copies of the
+    gaps: at least as good as the better of the two, within 10 %, on markers of a jump turn
+    (rigid partners win) and on joints of a walk with whole limbs gone (the KB wins)."""
     from mocap_gapfill.core.fill import validation_gaps
-    from mocap_gapfill.core.posing import points_missing
 
-    slow = read_motion(data_dir / DAZ / "13/13_01.bvh.gz", skip_frames=6)
-    slow = slow.replace(positions=resample(slow.positions, slow.fps, 60.0), fps=60.0)
-    slow = slow.frame_range(0, 400)
-    gaps = np.zeros(slow.missing.shape, bool)
-    gaps[150:210, slow.names.index("chest")] = True  # the upper body below the chest
-    miss = points_missing(gaps, slow.parents, np.zeros(slow.n_points, bool))
-    probe = validation_gaps(miss)
-    assert not (probe & miss).any() and probe.sum() >= miss.sum()  # copies beside the gaps
-    cases = [(slow, miss, daz_kb)]
     c3d = data_dir / "cmu/c3d"
     jump = read_motion(c3d / "85_02.c3d")
-    miss2 = np.zeros(jump.missing.shape, bool)
-    for name, a, b in (("LELB", 100, 189), ("RKNE", 300, 389), ("LWRA", 400, 519)):
-        miss2[a:b + 1, jump.names.index(name)] = True
-    cases.append((jump, miss2, build_kb([c3d / "01_01.c3d", c3d / "135_02.c3d"])))
+    miss = np.zeros(jump.missing.shape, bool)
+    for name, a, b in (("LELB", 100, 189), ("RKNE", 300, 389), ("LWRA", 400, 519),
+                       ("LFHD", 200, 319), ("RBWT", 500, 619)):
+        miss[a:b + 1, jump.names.index(name)] = True
+    probe = validation_gaps(miss)
+    assert not (probe & miss).any() and (probe.any(axis=0) == miss.any(axis=0)).all()
+    cases = [(jump, miss, build_kb([c3d / "01_01.c3d", c3d / "135_02.c3d"]))]
+    walk = read_motion(data_dir / DAZ / "13/13_01.bvh.gz", skip_frames=6)
+    walk = walk.replace(positions=resample(walk.positions, walk.fps, 60.0), fps=60.0)
+    walk = walk.frame_range(0, 400)
+    miss = np.zeros(walk.missing.shape, bool)
+    for name in ("lForeArm", "lHand", "rShin", "rFoot"):  # a forearm and a shin, ends included
+        miss[150:230, walk.names.index(name)] = True
+    cases.append((walk, miss, daz_kb))
     for truth, missing, kb in cases:
         query = with_gaps(truth, missing)
         scores = {m: rmse_mm(fill(query, m, kb=kb), truth, missing)
-                  for m in ("knn", "spline", "auto")}
+                  for m in ("knn", "rigid", "auto")}
         print(f"\n{Path(truth.source).name}: {scores}")
-        assert scores["auto"] <= 1.1 * min(scores["knn"], scores["spline"])
+        assert scores["auto"] <= 1.1 * min(scores["knn"], scores["rigid"])
 
 
 def test_local_models_are_shared_above_model_fps(data_dir):

@@ -3,7 +3,7 @@
 1. Exact masked search: 2,048 query frames, 65,536-pose knowledge base, K = 256, our blocked
    GEMM search beside scipy's cKDTree on the same data (one mask for all queries, so cKDTree gets
    one tree over the present coordinates; its build time is reported apart).
-2. Fill of a 2,048-frame clip (6 joints missing in every 120-frame interval) against a knowledge
+2. Fill (knn, and the default auto) of a 2,048-frame clip (6 joints missing in every 120-frame interval) against a knowledge
    base of all Daz-friendly BVH motion (120 fps, the test take 13_30 left out): seconds and peak
    memory (max RSS of a fresh process for the stage).
 
@@ -64,7 +64,7 @@ def stage_search(repeat):
             "speedup_vs_ckdtree": statistics.median(kd) / statistics.median(ours)}
 
 
-def stage_fill(repeat, k=None, device="auto"):
+def stage_fill(repeat, k=None, device="auto", method="knn"):
     import numpy as np
 
     from mocap_gapfill.core.evaluate import punch_gaps, rmse_mm, with_gaps
@@ -82,10 +82,10 @@ def stage_fill(repeat, k=None, device="auto"):
     times = []
     for _ in range(repeat):
         t = time.perf_counter()
-        out = fill(query, "knn", kb=kb, settings=KnnSettings(k=k, device=device))
+        out = fill(query, method, kb=kb, settings=KnnSettings(k=k, device=device))
         times.append(time.perf_counter() - t)
     return {"kb_size": kb.size, "frames": 2048, "fps": take.fps, "k": k or f"default ({DEFAULT_K})",
-            "device": device,
+            "device": device, "method": method,
             "kb_build_s": build, "fill_median_s": statistics.median(times),
             "rmse_missing_mm": rmse_mm(out, take, miss)}
 
@@ -103,7 +103,7 @@ def main():
     choose_blas_kernel()  # as the command line does; the stages inherit it
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--stage", choices=["search", "fill", "fill256"])
+    parser.add_argument("--stage", choices=["search", "fill", "fill256", "auto"])
     parser.add_argument("--json")
     parser.add_argument("--device", default="auto", help="the fill's (auto, numpy, cpu, cuda)")
     parser.add_argument("--skip-search", action="store_true")
@@ -111,7 +111,9 @@ def main():
     if args.stage:
         result = {"search": stage_search,
                   "fill": lambda r: stage_fill(r, device=args.device),
-                  "fill256": lambda r: stage_fill(r, k=256, device=args.device)}[args.stage](args.repeat)
+                  "fill256": lambda r: stage_fill(r, k=256, device=args.device),
+                  "auto": lambda r: stage_fill(r, device=args.device, method="auto"),
+                  }[args.stage](args.repeat)
         result["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         print(json.dumps(result))
         return
@@ -128,12 +130,13 @@ def main():
               f" ms  (+ build {1000 * search['ckdtree_build_s']:.0f} ms)")
         print(f"  speed-up over cKDTree       {search['speedup_vs_ckdtree']:8.1f} x")
     fills = [run_stage("fill", args.repeat, args.device),
-             run_stage("fill256", args.repeat, args.device)]
+             run_stage("fill256", args.repeat, args.device),
+             run_stage("auto", args.repeat, args.device)]
     print(f"fill: {fills[0]['frames']} frames at {fills[0]['fps']:g} fps, 6 joints missing per "
           f"120-frame interval, KB {fills[0]['kb_size']} poses (built in "
           f"{fills[0]['kb_build_s']:.1f} s; other takes of the test subject are in it)")
     for fill in fills:
-        print(f"  knn fill ({fill['device']}), K {fill['k']!s:14s} median {fill['fill_median_s']:6.2f} s, "
+        print(f"  {fill['method']} fill ({fill['device']}), K {fill['k']!s:14s} median {fill['fill_median_s']:6.2f} s, "
               f"peak RSS {fill['peak_rss_mb']:.0f} MB, RMSE missing {fill['rmse_missing_mm']:.1f} mm")
     if args.json:
         Path(args.json).write_text(json.dumps({"machine": machine, "search": search,

@@ -2,8 +2,9 @@
 
 Usage: python tools/results_table.py docs/results/*.json (bench.json from mocap-gapfill bench
 gives the speed tables)
-Per setting: mean RMSE over missing entries (and over all entries) across test takes, per method,
-and knn's ratio to the best baseline.
+Per setting: mean RMSE over missing entries (and over all entries, or the angle error for bones)
+across test takes, per method, each of our methods' ratio to the best baseline, and the spread of
+the default's ratio to the best baseline of each take.
 """
 
 import json
@@ -13,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 
-#: our methods; every other method is a baseline
+#: our methods, for results written before the JSON named its baselines
 OURS = ("knn", "auto")
 
 
@@ -53,25 +54,34 @@ def table(path):
     methods = list(dict.fromkeys(r["method"] for r in rows))
     settings = list(dict.fromkeys(r["setting"] for r in rows))
     tests = sorted({r["test"] for r in rows})
-    ours = [m for m in OURS if m in methods]
+    baselines = payload.get("baselines") or [m for m in methods if m not in OURS]
+    default = payload.get("default_method", "knn")
+    ours = [m for m in methods if m not in baselines]
+    second = "angle_deg" if "angle_deg" in rows[0] else "rmse_all_mm"
     out = [f"### {Path(path).stem}: protocol `{payload['protocol']}`, {payload.get('fps')} fps, "
            f"seed {payload.get('seed')}",
            f"Test takes ({len(tests)}): {', '.join(tests)}. Knowledge base: "
            f"{', '.join(Path(s).as_posix().split('data/')[-1] for s in payload['kb_sources'])}, "
-           "test subject left out.", "",
+           f"test subject left out. Default method: `{default}`; baselines: "
+           f"{', '.join(baselines)}.", "",
            "| setting | " + " | ".join(methods) + " | "
-           + " | ".join(f"{m} / best baseline" for m in ours) + " |",
-           "|---|" + "---:|" * (len(methods) + len(ours))]
+           + " | ".join(f"{m} / best baseline" for m in ours)
+           + f" | {default} / best baseline per take (min-max) |",
+           "|---|" + "---:|" * (len(methods) + len(ours) + 1)]
     for s in settings:
         cells, means = [], {}
         for m in methods:
             sel = [r for r in rows if r["setting"] == s and r["method"] == m]
             means[m] = np.mean([r["rmse_missing_mm"] for r in sel])
-            cells.append(f"{means[m]:.1f} ({np.mean([r['rmse_all_mm'] for r in sel]):.1f})")
-        best = min(v for m, v in means.items() if m not in OURS)
+            cells.append(f"{means[m]:.1f} ({np.mean([r[second] for r in sel]):.1f})")
+        best = min(v for m, v in means.items() if m in baselines)
         bold = [f"**{c}**" if means[m] == min(means.values()) else c for m, c in zip(methods, cells)]
+        got = {(r["method"], r["test"]): r["rmse_missing_mm"] for r in rows if r["setting"] == s}
+        per_take = [got[(default, t)] / min(got[(m, t)] for m in baselines) for t in tests
+                    if (default, t) in got]
         out.append(f"| {s} | " + " | ".join(bold) + " | "
-                   + " | ".join(f"{means[m] / best:.2f}" for m in ours) + " |")
+                   + " | ".join(f"{means[m] / best:.2f}" for m in ours)
+                   + f" | {min(per_take):.2f}-{max(per_take):.2f} |")
     seconds = {m: np.mean([r["seconds"] for r in rows if r["method"] == m]) for m in methods}
     out += ["", "Mean seconds per fill: " + ", ".join(f"{m} {v:.2f}" for m, v in seconds.items()),
             ""]

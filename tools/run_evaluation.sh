@@ -19,6 +19,10 @@ $MG evaluate --protocol joints --quiet --kb-sources "$AMC" --exclude-kb '*02_01.
   --json docs/results/joints_amc31.json
 $MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
   --test "$D/cmu/c3d/85_02.c3d" --json docs/results/markers_cmu_kb.json
+# the gaps real captures have (01_01: RBAC's last 30 frames; 02_05: RSHN, 3 frames) on 85_02
+$MG evaluate --protocol realgaps --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
+  --gap-sources "$D/cmu/c3d/01_01.c3d" "$D/cmu/c3d/02_05.c3d" \
+  --test "$D/cmu/c3d/85_02.c3d" --json docs/results/realgaps_cmu_kb.json
 # HDM05-derived numbers (CC BY-SA 3.0 data in the knowledge base)
 $MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
   --test "$D/cmu/c3d/85_02.c3d" --json docs/results/markers_hdm05_kb.json

@@ -1,0 +1,111 @@
+"""The fills studios already have (rigid body, pattern) and the body-frame spline: exact where
+their assumptions hold, and what they are worth on real markers."""
+
+import numpy as np
+import pytest
+
+from mocap_gapfill.core import baselines
+from mocap_gapfill.core.evaluate import rmse_mm, with_gaps
+from mocap_gapfill.core.fill import BASELINES, DEFAULT_METHOD, METHODS, fill, validation_gaps
+from mocap_gapfill.core.io import read_motion
+from mocap_gapfill.core.normalize import find_reference, rotation_z
+
+
+def _tumbling_body(frames=200, seed=0):
+    """Six points of one rigid body turning about a wandering axis and drifting, plus a seventh
+    point that moves on its own."""
+    rng = np.random.default_rng(seed)
+    shape = rng.normal(0, 0.15, (6, 3))
+    t = np.linspace(0, 2, frames)[:, None]
+    rotvec = np.concatenate([np.sin(2 * t), 0.5 * t, np.cos(3 * t) - 1], axis=1)
+    from scipy.spatial.transform import Rotation
+
+    turn = Rotation.from_rotvec(rotvec).as_matrix()
+    body = np.einsum("fij,nj->fni", turn, shape) + np.concatenate(
+        [t, np.sin(t), 0.2 * t], axis=1)[:, None]
+    loose = rng.normal(0, 0.3, (frames, 1, 3)).cumsum(axis=0) * 0.01
+    return np.concatenate([body, loose], axis=1)
+
+
+def test_rigid_fill_is_exact_on_a_rigid_body_and_ignores_loose_points():
+    pos = _tumbling_body()
+    gappy = pos.copy()
+    gappy[50:120, 2] = np.nan  # inside the take
+    gappy[170:, 4] = np.nan  # to the clip end: carried from one side only
+    gappy[60:80, 0] = np.nan  # a donor gone for part of the gap: others stand in
+    out = baselines.fill_rigid(gappy)
+    np.testing.assert_allclose(out[50:120, 2], pos[50:120, 2], atol=1e-9)
+    np.testing.assert_allclose(out[170:, 4], pos[170:, 4], atol=1e-9)
+    np.testing.assert_array_equal(out[~np.isnan(gappy)], gappy[~np.isnan(gappy)])
+    # the loose point is never a donor: its distance to the body varies
+    _, spread = baselines.rigid_estimates(gappy)
+    assert np.nanmax(spread) < 1e-9
+    # linear interpolation, the fallback, is far off on the same gap
+    assert np.abs(baselines.fill_linear(gappy)[50:120, 2] - pos[50:120, 2]).max() > 0.02
+
+
+def test_rigid_fill_falls_back_to_linear_without_three_donors():
+    pos = _tumbling_body()[:, [0, 1, 6]]  # two body points and the loose one
+    gappy = pos.copy()
+    gappy[50:70, 0] = np.nan
+    np.testing.assert_allclose(baselines.fill_rigid(gappy), baselines.fill_linear(gappy))
+
+
+def test_pattern_fill_follows_the_donor_and_meets_both_gap_ends():
+    rng = np.random.default_rng(1)
+    donor = rng.normal(0, 0.01, (300, 3)).cumsum(axis=0)
+    drift = np.linspace(0, 1, 300)[:, None] * np.array([0.1, -0.05, 0.02])  # linear in time
+    pos = np.stack([donor + 0.2 + drift, donor, rng.normal(0, 0.01, (300, 3)).cumsum(axis=0)],
+                   axis=1)
+    gappy = pos.copy()
+    gappy[100:180, 0] = np.nan
+    gappy[260:, 0] = np.nan  # at the clip end: the offset of the one side
+    out = baselines.fill_pattern(gappy)
+    np.testing.assert_allclose(out[100:180, 0], pos[100:180, 0], atol=1e-12)
+    np.testing.assert_allclose(out[260:, 0], donor[260:] + pos[259, 0] - donor[259], atol=1e-12)
+
+
+def test_local_spline_is_exact_for_a_body_that_only_walks_and_turns():
+    """A still pose carried along a path, turning to and fro: a spline in the body frame is
+    exact, a spline in the world is not."""
+    rng = np.random.default_rng(2)
+    names = ["LFWT", "RFWT", "LBWT", "RBWT", "LFHD", "RFHD"]
+    pose = rng.normal(0, 0.2, (6, 3))
+    pose[:4] = [[0.1, 0.12, 1.0], [-0.1, 0.12, 1.0], [0.1, -0.1, 1.0], [-0.1, -0.1, 1.0]]
+    t = np.linspace(0, 4, 240)
+    angle = 2.5 * np.sin(3 * t)  # turning back and forth
+    root = np.stack([np.cos(t), np.sin(t), 0 * t], axis=1)
+    pos = np.einsum("fij,nj->fni", rotation_z(angle), pose) + root[:, None]
+    gappy = pos.copy()
+    gappy[80:140, 4] = np.nan
+    local = baselines.fill_local_spline(gappy, find_reference(names))
+    np.testing.assert_allclose(local[80:140, 4], pos[80:140, 4], atol=1e-6)
+    assert np.abs(baselines.fill_spline(gappy)[80:140, 4] - pos[80:140, 4]).max() > 0.01
+
+
+def test_studio_fills_on_real_markers(data_dir):
+    """CMU 85_02 (41 markers, a jump turn): head and pelvis markers, which ride on rigid
+    segments, come back within millimetres from their partners; every baseline is a method."""
+    assert {"rigid", "pattern", "local-spline"} <= set(BASELINES) <= set(METHODS)
+    assert DEFAULT_METHOD not in BASELINES
+    take = read_motion(data_dir / "cmu/c3d/85_02.c3d")
+    miss = np.zeros(take.missing.shape, bool)
+    for name, a, b in (("LFHD", 100, 219), ("RBWT", 400, 519)):
+        miss[a:b + 1, take.names.index(name)] = True
+    query = with_gaps(take, miss)
+    scores = {m: rmse_mm(fill(query, m), take, miss)
+              for m in ("rigid", "pattern", "local-spline", "spline")}
+    print(scores)
+    assert scores["rigid"] < 8.0
+    assert scores["rigid"] < scores["pattern"] < scores["spline"]
+
+
+@pytest.mark.parametrize("frames", [60, 180])
+def test_copies_of_long_gaps_fit_short_takes(frames):
+    """A gap too long for a full-length copy gets a shorter one rather than none."""
+    miss = np.zeros((frames, 2), bool)
+    miss[: 2 * frames // 3, 0] = True
+    probe = validation_gaps(miss)
+    assert probe[:, 0].any() and not (probe & miss).any()
+    run = np.flatnonzero(probe[:, 0])
+    assert not miss[run[0] - 1, 0] and run[-1] + 1 < frames  # observed either side
