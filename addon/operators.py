@@ -74,18 +74,31 @@ class MOCAP_GAPFILL_OT_import_markers(bpy.types.Operator, ImportHelper):
     bl_options = {"REGISTER", "UNDO"}
 
     filter_glob: StringProperty(default="*.c3d;*.npz;*.csv", options={"HIDDEN"})
+    up: EnumProperty(name="Up", default="DETECT", items=(
+        ("DETECT", "Detect", "As the file's header says, unless the markers lie on their side "
+                             "that way (head not above the feet): then turned to stand"),
+        ("FILE", "File header", "As the file's header (C3D POINT:Y_SCREEN) says"),
+        ("y", "Y up", "The data is Y-up, whatever the header says"),
+        ("z", "Z up", "The data is Z-up, whatever the header says")))
 
     def execute(self, context):
         from ..core.io import read_motion
+        from ..core.upright import stand_up, upright_warning
 
         try:
-            motion = read_motion(self.filepath)
+            motion = read_motion(self.filepath, up=self.up if self.up in ("y", "z") else None)
         except GapFillError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         if motion.parents is not None:
             self.report({"ERROR"}, "this file holds a skeleton: use Import Skeleton")
             return {"CANCELLED"}
+        if self.up == "DETECT":
+            motion, message = stand_up(motion)
+        else:
+            message = upright_warning(motion)
+        if message:
+            self.report({"WARNING"}, message.replace("--up", "Up:"))
         root = bridge.import_markers(context, motion, Path(self.filepath).stem)
         compat.select_objects(context, [root], active=root)
         take = gaps.detect(root, context.scene, suspects=False)

@@ -143,7 +143,7 @@ def fill_intercorrelation(pos, variance=0.99, iterations=30, tol=1e-6):
 def _pair_stats(pos, p, seen):
     """For point ``p`` against every point: the standard deviation of their distance and the
     total variance of their offset over the frames where both are seen (inf where fewer than
-    3 such frames, and for ``p`` itself)."""
+    10 such frames, and for ``p`` itself)."""
     both = seen & seen[:, p:p + 1]
     count = both.sum(axis=0)
     offset = np.where(both[..., None], pos - pos[:, p:p + 1], 0.0)
@@ -154,7 +154,7 @@ def _pair_stats(pos, p, seen):
         mean_o = offset.sum(axis=0) / count[:, None]
         offset_var = (np.where(both[..., None], (offset - mean_o) ** 2, 0).sum(axis=(0, 2))
                       / count)
-    bad = count < 3
+    bad = count < 10
     bad[p] = True
     return np.where(bad, np.inf, dist_sd), np.where(bad, np.inf, offset_var)
 
@@ -178,20 +178,21 @@ def fill_rigid(pos, donors=RIGID_DONORS):
     return rigid_estimates(pos, donors)[0]
 
 
-def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None):
+def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cache=None):
     """:func:`fill_rigid` and, per sample it carried, the RMS spread (metres) of its donors'
     distances to it: near 0 where the point rides on a rigid segment with them (NaN elsewhere).
 
     ``weighted`` weighs each donor's fit by the inverse square of its spread. ``partners``:
     positions (same shape, more of them seen) to choose the donors from, e.g. a take whose
-    gaps are hidden further to test the fill.
+    gaps are hidden further to test the fill. ``cache``: a dict kept between calls with the
+    same ``partners``, so their statistics are computed once.
     """
     pos = np.asarray(pos, dtype=np.float64)
     frames = len(pos)
     seen = np.isfinite(pos[..., 0])
     out = pos.copy()
     spreads = np.full(seen.shape, np.nan)
-    stats = {}
+    stats = {} if cache is None else cache
     for p, a, b in gap_runs(~seen):
         ends = _gap_ends(a, b, frames)
         if not ends:
@@ -208,13 +209,11 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None):
         ok = seen[a:b + 1][:, order]
         # per frame, the steadiest donors seen there; frames sharing a donor set are fitted
         # together
-        picks = {}
-        for i, row in enumerate(ok):
-            chosen = tuple(order[row][:donors])
-            if len(chosen) == donors:
-                picks.setdefault(chosen, []).append(i)
-        for chosen, rows in picks.items():
-            chosen, rows = list(chosen), np.array(rows)
+        first = ok & (np.cumsum(ok, axis=1) <= donors)
+        full = first.sum(axis=1) == donors
+        sets, which = np.unique(first[full], axis=0, return_inverse=True)
+        for k, pick in enumerate(sets):
+            chosen, rows = order[pick], np.flatnonzero(full)[which.ravel() == k]
             w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(donors)
             w = (w / w.sum())[:, None]
             cur = pos[a + rows][:, chosen]  # (t, donors, 3)

@@ -28,11 +28,25 @@ def _add_read_options(parser):
     group.add_argument("--skip-frames", type=int, default=0, metavar="N",
                        help="drop N leading frames (e.g. 1 for a BVH reference pose)")
     group.add_argument("--end-sites", action="store_true", help="BVH: include End Site points")
+    group.add_argument("--up", choices=["y", "z"],
+                       help="the up axis of the file's data, whatever its header says (a take "
+                            "that lies on its side is named in a warning)")
 
 
 def _read_kwargs(args):
     return {"asf": args.asf, "units": args.units, "skip_frames": args.skip_frames,
-            "end_sites": args.end_sites}
+            "end_sites": args.end_sites, "up": args.up}
+
+
+def _read(path, args):
+    """read_motion with the command's options; warns when the take lies on its side."""
+    from .upright import upright_warning
+
+    motion = read_motion(path, **_read_kwargs(args))
+    warning = upright_warning(motion)
+    if warning:
+        print(f"warning: {Path(path).name}: {warning}", file=sys.stderr)
+    return motion
 
 
 def _format_summary(s):
@@ -54,7 +68,7 @@ def cmd_info(args):
     results, failed = [], 0
     for path in args.files:
         try:
-            summary = read_motion(path, **_read_kwargs(args)).summary()
+            summary = _read(path, args).summary()
         except GapFillError as exc:
             failed += 1
             results.append({"path": str(path), "error": str(exc)})
@@ -81,7 +95,7 @@ def _check_output(dst, force, src=None):
 def cmd_convert(args):
     src, dst = Path(args.input), Path(args.output)
     _check_output(dst, args.force, src)
-    motion = read_motion(src, **_read_kwargs(args))
+    motion = _read(src, args)
     write_motion(motion, dst, overwrite=args.force)
     print(f"wrote {dst} ({motion.n_frames} frames, {motion.n_points} points)")
     return 0
@@ -121,7 +135,8 @@ def cmd_kb_build(args):
     progress = Progress(args.quiet)
     kb = build_kb(args.sources, fps=args.fps, exclude=args.exclude or (),
                   skip_frames=args.skip_frames, stride=args.stride,
-                  read_options={"units": args.units, "end_sites": args.end_sites},
+                  read_options={"units": args.units, "end_sites": args.end_sites,
+                                "up": args.up},
                   progress=progress, report=_report)
     progress.done()
     kb.save(out, overwrite=args.force)
@@ -137,7 +152,7 @@ def cmd_fill(args):
 
     src, dst = Path(args.input), Path(args.output)
     _check_output(dst, args.force, src)
-    motion = read_motion(src, **_read_kwargs(args))
+    motion = _read(src, args)
     kb = load_kb(args.kb) if args.kb else None
     if kb is None and args.method in NEEDS_KB:
         raise GapFillError(f"method {args.method!r} needs a knowledge base: -k KB.npz "

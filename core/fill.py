@@ -113,9 +113,11 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     missing = motion.missing
     probe = validation_gaps(missing, AUTO_PROBES)
 
+    partners = {}  # the donors' statistics on this take, computed once
+
     def carried(target):
         rigid, spread = rigid_estimates(target.positions, AUTO_DONORS, weighted=True,
-                                        partners=motion.positions)
+                                        partners=motion.positions, cache=partners)
         return np.where(np.isnan(spread)[..., None], np.nan, rigid)
 
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point
@@ -142,7 +144,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     given = motion.replace(positions=np.where(ahead[..., None], rigid, motion.positions))
     start = 0.5 if probe.any() else 0.0
     knn = fill_knn(given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
-                   should_cancel=should_cancel).positions
+                   should_cancel=should_cancel, report=report).positions
     w = np.broadcast_to(weight[None], missing.shape).copy()
     w[np.isnan(rigid[..., 0])] = 1.0
     w[np.isnan(knn[..., 0])] = 0.0

@@ -28,7 +28,7 @@ def _suffix(path):
     return ".bvh.gz" if name.endswith(".bvh.gz") else Path(name).suffix
 
 
-def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False):
+def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=None):
     """Read a motion file into a :class:`~mocap_gapfill.core.motion.Motion`.
 
     Parameters
@@ -43,6 +43,9 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False):
         Leading frames to drop (BVH reference poses).
     end_sites : bool
         BVH only: include End Site points.
+    up : str, optional
+        ``"y"`` or ``"z"``: the up axis of the file's data, whatever its header says (see
+        :mod:`.upright`); default: the header's.
 
     Raises
     ------
@@ -90,6 +93,10 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False):
         if skip_frames > motion.n_frames:
             raise ParseError(f"cannot skip {skip_frames} of {motion.n_frames} frames", path)
         motion = motion.frame_range(skip_frames)
+    if up is not None:
+        from .upright import turn_up
+
+        motion = turn_up(motion, up)
     return motion
 
 

@@ -16,6 +16,7 @@ from .errors import GapFillError, ParseError
 from .formats.tabular import load_arrays, scalar, strings
 from .io import READ_FORMATS, atomic_output, read_motion
 from .normalize import find_reference, frames_of, normalize
+from .upright import upright_warning
 
 KB_VERSION = 1
 #: a cap on what a KB file may hold, checked before any array is loaded
@@ -185,7 +186,11 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
             raise KeyboardInterrupt
         if progress:
             progress(i / len(files), f"reading {path.name}")
-        motions.append(read_motion(path, skip_frames=skip_frames, **(read_options or {})))
+        motion = read_motion(path, skip_frames=skip_frames, **(read_options or {}))
+        warning = upright_warning(motion)
+        if warning and report:
+            report(f"{path.name}: {warning}")
+        motions.append(motion)
     kb = kb_from_motions(motions, fps, stride, report)
     if progress:
         progress(1.0, "done")

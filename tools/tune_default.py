@@ -9,6 +9,7 @@ compared offline (docs/METHOD_NOTES.md).
     python tools/tune_default.py joints OUTDIR auto    (refill one method into OUTDIR)
 """
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -21,7 +22,8 @@ from mocap_gapfill.core.fill import fill, validation_gaps
 from mocap_gapfill.core.io import read_motion
 from mocap_gapfill.core.kb import build_kb, resample
 
-DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
+DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA",
+                           Path(__file__).resolve().parents[2] / "shared" / "data"))
 CANDIDATES = ("auto", "knn", "rigid", "pattern", "local-spline", "spline", "linear")
 TEST_TAKES = ["01_01", "02_02", "05_02", "06_10", "09_12", "10_01", "12_02", "13_30"]
 RUNS = {
