@@ -155,7 +155,10 @@ def test_ctrl_c_stops_cleanly_and_writes_nothing(data_dir, tmp_path):
     out = tmp_path / "filled.npz"
     proc = subprocess.Popen([sys.executable, "-m", "mocap_gapfill", "fill", str(gappy), "-k",
                              str(kb), "-o", str(out)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            # as from a terminal, also where this run's shell ignores Ctrl-C
+                            # (a background job of a script inherits SIGINT ignored)
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen = ""
     while "%" not in seen:  # the fill has begun (its first progress line)
         char = proc.stderr.read(1)
