@@ -39,11 +39,8 @@ def run(args, report=print):
     context = bpy.context
     scene = context.scene
     out = output_path(bpy.data.filepath, args.output, args.overwrite)
-    kb = None
-    if args.method in NEEDS_KB:
-        if not args.kb:
-            raise GapFillError(f"method {args.method!r} needs a knowledge base: --kb KB.npz")
-        kb = gaps.load_kb_cached(args.kb)
+    # without --kb, each take gets the starter knowledge base that fits it (gaps.plan_fill)
+    kb = gaps.load_kb_cached(args.kb) if args.kb and args.method in NEEDS_KB else None
     owners = (gaps.takes_in(context, args.objects) if args.objects else gaps.all_takes(scene))
     if not owners:
         raise GapFillError("no armature or marker set in this file")

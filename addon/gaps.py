@@ -172,6 +172,7 @@ class FillPlan:
     gap_ids: list  # indices into the owner's gap list that this fill covers
     bone_gaps: np.ndarray = None  # (frames, bones) armatures: frames without good keys
     messages: list = field(default_factory=list)  # what the fill had to say
+    kb: object = None  # the knowledge base for this take (a starter one where none was chosen)
 
 
 def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, max_gap=0, kb=None,
@@ -183,12 +184,13 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
     Armatures with ``knn`` or ``auto`` are filled in the space of their gaps
     (:func:`~..core.bonefill.fill_bones`, method ``auto``): only the gapped bones' rotations
     change, and only on gaps where the knowledge base refills copies of the gap better than
-    Blender's own interpolation; other methods fill joint positions and solve the bones."""
+    Blender's own interpolation; other methods fill joint positions and solve the bones.
+    Without a knowledge base (``kb`` None), methods that need one take the starter knowledge
+    base whose names match the take (:func:`~..core.kb.starter_kb`), or say why none fits."""
     from ..core.fill import NEEDS_KB, fill
+    from ..core.kb import starter_kb
     from ..core.recover import KnnSettings
 
-    if method in NEEDS_KB and kb is None:
-        raise GapFillError("choose a knowledge base first (Mocap tab > Knowledge base)")
     plans = []
     for owner in owners:
         settings = owner.mocap_gapfill
@@ -209,7 +211,17 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
         missing = bridge.missing_points(take, every)
         if take.kind == "markers":
             write &= missing
-        plans.append(FillPlan(owner.name, take, write, missing, ids, every))
+        plan = FillPlan(owner.name, take, write, missing, ids, every, kb=kb)
+        if method in NEEDS_KB and kb is None:
+            try:
+                path, plan.kb = starter_kb(list(take.names))
+            except GapFillError as exc:
+                raise GapFillError(f"'{owner.name}': {exc}; or choose a knowledge base (Mocap "
+                                   "tab > Knowledge base), or the Rigid body method for "
+                                   "markers") from None
+            plan.messages.append(f"no knowledge base chosen: the starter {path.name} "
+                                 f"({plan.kb.size} poses of CMU motion)")
+        plans.append(plan)
     if not plans:
         raise GapFillError("no gaps to fill: detect or mark gaps first"
                            + (f" (or raise Max gap above {max_gap})" if max_gap else ""))
@@ -224,11 +236,11 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
             take = plan.take
             if take.kind == "armature" and method in ("knn", "auto"):
                 # rotation gaps: Blender's interpolation unless the KB measurably beats it
-                results.append((None, fill_armature(take, plan.bone_gaps, kb, knn, step,
+                results.append((None, fill_armature(take, plan.bone_gaps, plan.kb, knn, step,
                                                     should_cancel, plan.messages.append)))
                 continue
-            filled = fill(take.motion(plan.missing), method, kb=kb, settings=knn, progress=step,
-                          should_cancel=should_cancel).positions
+            filled = fill(take.motion(plan.missing), method, kb=plan.kb, settings=knn,
+                          progress=step, should_cancel=should_cancel).positions
             basis = None
             if take.kind == "armature":
                 basis, _ = bridge.solve_armature(take, filled, plan.write)

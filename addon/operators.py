@@ -255,10 +255,8 @@ class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
         if not owners:
             raise GapFillError("select an armature or a marker set")
         kb = None
-        if settings.method in NEEDS_KB:
-            path = gaps.kb_path(context)
-            if not path:
-                raise GapFillError("choose a knowledge base first (Mocap tab > Knowledge base)")
+        path = gaps.kb_path(context) if settings.method in NEEDS_KB else ""
+        if path:  # none chosen: the starter knowledge base that fits each take
             kb = gaps.load_kb_cached(path)
             prefs.remember_kb(path, context)
         self._plans, work = gaps.plan_fill(context, owners, self.scope == "SELECTED",

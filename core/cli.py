@@ -147,7 +147,7 @@ def cmd_kb_build(args):
 
 def cmd_fill(args):
     from .fill import NEEDS_KB, fill
-    from .kb import load_kb
+    from .kb import load_kb, starter_kb
     from .recover import KnnSettings
 
     src, dst = Path(args.input), Path(args.output)
@@ -155,8 +155,14 @@ def cmd_fill(args):
     motion = _read(src, args)
     kb = load_kb(args.kb) if args.kb else None
     if kb is None and args.method in NEEDS_KB:
-        raise GapFillError(f"method {args.method!r} needs a knowledge base: -k KB.npz "
-                           "(make one with 'mocap-gapfill kb build')")
+        try:
+            path, kb = starter_kb(motion.names)
+        except GapFillError as exc:
+            raise GapFillError(f"method {args.method!r} needs a knowledge base: -k KB.npz "
+                               f"(make one with 'mocap-gapfill kb build'); {exc}; without one, "
+                               "--method rigid fills markers from their rigid partners") from None
+        _report(f"no -k given: the starter knowledge base {path.name} ({kb.size} poses of CMU "
+                "motion)")
     progress = Progress(args.quiet)
     kept = _long_gaps(motion, args.max_gap) if args.max_gap else None
     out = fill(motion, args.method, kb=kb, settings=KnnSettings(k=args.k, device=args.device),
@@ -185,6 +191,8 @@ def _long_gaps(motion, max_gap):
 def cmd_evaluate(args):
     from .evaluate import evaluate, table
 
+    if not args.kb_sources and not (args.kb and args.protocol != "bones"):
+        raise GapFillError("give the knowledge base: --kb-sources PATH... (or --kb KB.npz)")
     progress = Progress(args.quiet)
     if args.protocol == "bones":
         from .bonefill import BONE_BASELINES, BONE_METHODS
@@ -208,7 +216,8 @@ def cmd_evaluate(args):
         results = evaluate(args.protocol, args.test, args.kb_sources, methods=methods,
                            fps=args.fps, seed=args.seed, k=args.k, skip_frames=args.skip_frames,
                            settings=args.settings, exclude=args.exclude_kb or (),
-                           gap_sources=args.gap_sources, progress=progress, report=_report)
+                           gap_sources=args.gap_sources, kb_file=args.kb, progress=progress,
+                           report=_report)
     progress.done()
     print(table(results))
     if args.json:
@@ -216,7 +225,8 @@ def cmd_evaluate(args):
                    "baselines": [m for m in baselines if m in methods], "fps": args.fps,
                    "seed": args.seed, "k": args.k,
                    "tests": [str(t) for t in args.test],
-                   "kb_sources": [str(s) for s in args.kb_sources], "results": results}
+                   "kb_sources": [str(s) for s in args.kb_sources or [args.kb]],
+                   "results": results}
         Path(args.json).write_text(json.dumps(payload, indent=1))
         print(f"wrote {args.json}")
     return 0
@@ -274,7 +284,9 @@ def build_parser(extra=None):
 
     p = sub.add_parser("fill", help="fill the gaps of a motion file")
     p.add_argument("input", help=f"{', '.join(READ_FORMATS)}")
-    p.add_argument("-k", "--kb", help="knowledge base (.npz) for the knn and pca methods")
+    p.add_argument("-k", "--kb", help="knowledge base (.npz) for the auto, knn and pca methods "
+                                      "(default: the starter one shipped for the take's "
+                                      "skeleton or marker set, where one fits)")
     p.add_argument("-o", "--output", required=True,
                    help=f"{', '.join(WRITE_FORMATS)} (chosen by extension)")
     p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS,
@@ -301,8 +313,11 @@ def build_parser(extra=None):
                         "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
                         "rate; methods auto, knn, interp, slerp, positions")
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")
-    p.add_argument("--kb-sources", nargs="+", required=True, metavar="PATH",
+    p.add_argument("--kb-sources", nargs="+", default=[], metavar="PATH",
                    help="knowledge-base files/folders (the test subject is left out)")
+    p.add_argument("--kb", metavar="KB.npz",
+                   help="a knowledge-base file instead of --kb-sources (e.g. a starter one; "
+                        "the test subject is still left out)")
     p.add_argument("--methods", nargs="+", metavar="METHOD",
                    help=f"some of {', '.join(METHODS)} (default: all of the protocol's)")
     p.add_argument("--settings", nargs="+", metavar="LABEL",

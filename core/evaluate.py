@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import GapFillError
 from .fill import METHODS, fill
-from .kb import KnowledgeBase, build_kb, resample
+from .kb import KnowledgeBase, build_kb, load_kb, resample
 from .motion import gap_runs
 from .io import read_motion
 from .recover import KnnSettings
@@ -150,8 +150,8 @@ def kb_without(kb, subject):
 
 
 def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=None,
-             skip_frames=0, settings=None, exclude=(), gap_sources=(), progress=None,
-             report=None):
+             skip_frames=0, settings=None, exclude=(), gap_sources=(), kb_file=None,
+             progress=None, report=None):
     """Run a protocol; a list of result dicts (method, setting, test, rmse_missing_mm, ...)."""
     report = report or (lambda message: None)
     chosen = [s for s in settings_of(protocol, gap_sources)
@@ -159,8 +159,8 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
     if protocol == "realgaps":  # the gap sources' masks, read once
         chosen = [(label, _at_rate(read_motion(path, skip_frames=skip_frames), fps))
                   for label, path in chosen]
-    full_kb = build_kb(kb_sources, fps=fps, skip_frames=skip_frames, exclude=exclude,
-                       report=report)
+    full_kb = load_kb(kb_file) if kb_file else build_kb(
+        kb_sources, fps=fps, skip_frames=skip_frames, exclude=exclude, report=report)
     results = []
     total = len(tests) * len(chosen) * len(methods)
     done = 0

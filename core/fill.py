@@ -45,7 +45,8 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
     if method not in METHODS:
         raise GapFillError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     if method in NEEDS_KB and kb is None:
-        raise GapFillError(f"method {method!r} needs a knowledge base (-k KB.npz)")
+        raise GapFillError(f"method {method!r} needs a knowledge base (-k KB.npz); without "
+                           "one, 'rigid' fills markers from their rigid partners")
     if not motion.missing.any():
         return motion
     if method == "knn":

@@ -69,16 +69,18 @@ class KnowledgeBase:
         return {"poses": self.size, "points": len(self.names), "fps": self.fps,
                 "sources": len(self.sources), "names": list(self.names)}
 
-    def save(self, path, overwrite=False):
-        """Write atomically to ``path`` (``.npz``)."""
+    def save(self, path, overwrite=False, compact=False):
+        """Write atomically to ``path`` (``.npz``); ``compact``: poses as float16 (0.5 mm steps
+        at 1 m), compressed, for knowledge bases shipped with the extension."""
+        write = np.savez_compressed if compact else np.savez
         with atomic_output(path, overwrite) as tmp, open(tmp, "wb") as handle:
-            np.savez(handle, format_version=np.int64(KB_VERSION),
-                     poses=self.poses.astype(np.float32),
-                     names=np.array(self.names, dtype=str), fps=np.float64(self.fps),
-                     limbs=np.asarray(self.limbs, dtype=np.int64),
-                     sources=np.array(self.sources, dtype=str),
-                     source_index=self.source_index.astype(np.int32),
-                     reference=np.str_(json.dumps(self.reference.to_dict(self.names))))
+            write(handle, format_version=np.int64(KB_VERSION),
+                  poses=self.poses.astype(np.float16 if compact else np.float32),
+                  names=np.array(self.names, dtype=str), fps=np.float64(self.fps),
+                  limbs=np.asarray(self.limbs, dtype=np.int64),
+                  sources=np.array(self.sources, dtype=str),
+                  source_index=self.source_index.astype(np.int32),
+                  reference=np.str_(json.dumps(self.reference.to_dict(self.names))))
         return Path(path)
 
 
@@ -101,9 +103,11 @@ def load_kb(path):
     if version < 1:
         raise ParseError(f"bad format_version {version}", path)
     poses = arrays["poses"]
-    if poses.dtype != np.float32 or poses.ndim != 3 or poses.shape[2] != 3 or not poses.size:
-        raise ParseError(f"poses must be float32 (poses, points, 3), got {poses.dtype} "
-                         f"{poses.shape}", path)
+    if poses.dtype not in (np.float32, np.float16) or poses.ndim != 3 or poses.shape[2] != 3 \
+            or not poses.size:
+        raise ParseError(f"poses must be float32 or float16 (poses, points, 3), got "
+                         f"{poses.dtype} {poses.shape}", path)
+    poses = poses.astype(np.float32, copy=False)
     names = strings(arrays, "names", (poses.shape[1],), path, unique=True)
     if not np.isfinite(poses).all():
         raise ParseError("poses contain NaN or infinite values", path)
@@ -251,4 +255,35 @@ def match_names(kb, names):
     return common, lacking
 
 
-__all__ = ["KnowledgeBase", "build_kb", "kb_from_motions", "load_kb", "match_names", "resample"]
+#: knowledge bases shipped with the extension, built from CMU motion by
+#: tools/build_starter_kbs.py: the Daz-friendly BVH skeleton (43 joints) and the 41-marker set
+STARTER_DIR = Path(__file__).resolve().parents[1] / "sample_scenes"
+STARTER_KBS = ("cmu_daz43_kb.npz", "cmu_markers41_kb.npz")
+
+
+def starter_kb(names):
+    """``(path, kb)``: the starter knowledge base that shares the most of ``names`` and enough of
+    them to fill (:func:`match_names`); :class:`GapFillError` naming what the closest lacks
+    when none does."""
+    best, error = None, None
+    for path in (STARTER_DIR / name for name in STARTER_KBS):
+        if not path.is_file():
+            continue
+        kb = load_kb(path)
+        try:
+            common, _ = match_names(kb, names)
+        except GapFillError as exc:
+            error = error or exc
+            continue
+        if best is None or len(common) > best[0]:
+            best = (len(common), path, kb)
+    if best is None:
+        raise GapFillError("no starter knowledge base fits this take: "
+                           + (str(error).replace("the knowledge base", "the closest")
+                              if error else f"none found in {STARTER_DIR}")
+                           + "; build one with 'kb build' from clean takes of this set")
+    return best[1], best[2]
+
+
+__all__ = ["KnowledgeBase", "build_kb", "kb_from_motions", "load_kb", "match_names", "resample",
+           "starter_kb"]

@@ -90,8 +90,12 @@ def test_kb_build_then_fill(data_dir, tmp_path):
     # --max-gap leaves longer gaps alone: RBAC's gap is 30 frames
     r = cli("fill", src, "-k", kb, "-o", tmp_path / "short.npz", "--max-gap", "20", "--quiet")
     assert r.returncode == 0 and "filled 0 samples" in r.stdout
-    r = cli("fill", src, "-o", tmp_path / "x.npz", "--method", "pca")
+    # no -k: the starter knowledge base of the marker set; none for a skeleton it does not know
+    r = cli("fill", src, "-o", tmp_path / "x.npz", "--method", "pca", "--quiet")
+    assert r.returncode == 0 and "starter knowledge base cmu_markers41_kb.npz" in r.stderr
+    r = cli("fill", data_dir / "cmu/asfamc/01/01_01.amc", "-o", tmp_path / "y.npz")
     assert r.returncode == 2 and "needs a knowledge base" in r.stderr
+    assert "no starter knowledge base fits this take" in r.stderr and "lhipjoint" in r.stderr
 
 
 def test_evaluate_writes_json(data_dir, tmp_path):

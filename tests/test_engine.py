@@ -373,3 +373,25 @@ def test_energy_and_gradient_match_the_terms_written_out(daz_kb, walk, monkeypat
             step = rng.normal(size=h.size) * 1e-4
             slope = (problem.energy(h.ravel() + step)[0] - problem.energy(h.ravel() - step)[0]) / 2
             assert slope == pytest.approx(grad @ step, rel=1e-4)
+
+
+def test_starter_knowledge_bases(data_dir, tmp_path):
+    """The KBs shipped in sample_scenes/: compact (float16 within 0.5 mm), picked by the take's
+    names, and a clear message where none fits."""
+    from mocap_gapfill.core.kb import STARTER_DIR, STARTER_KBS, starter_kb
+
+    sizes = [(STARTER_DIR / name).stat().st_size for name in STARTER_KBS]
+    assert sum(sizes) < 8e6, sizes
+    bvh = read_motion(data_dir / DAZ / "13/13_30.bvh.gz", skip_frames=6)
+    c3d = read_motion(data_dir / "cmu/c3d/85_02.c3d")
+    path, kb = starter_kb(bvh.names)
+    assert path.name == "cmu_daz43_kb.npz" and set(kb.names) == set(bvh.names)
+    assert kb.poses.dtype == np.float32 and kb.size > 10000
+    assert not any("HDM" in s for s in kb.sources)  # CC BY-SA data stays out of the product
+    path, kb = starter_kb(c3d.names)
+    assert path.name == "cmu_markers41_kb.npz" and set(kb.names) == set(c3d.names)
+    with pytest.raises(GapFillError, match="no starter knowledge base fits.*lhipjoint"):
+        starter_kb(read_motion(data_dir / "cmu/asfamc/01/01_01.amc").names)
+    full = build_kb([data_dir / "cmu/c3d/85_02.c3d"], fps=30)
+    full.save(tmp_path / "compact.npz", compact=True)
+    np.testing.assert_allclose(load_kb(tmp_path / "compact.npz").poses, full.poses, atol=5e-4)

@@ -293,14 +293,26 @@ def test_errors_are_reported_and_change_nothing(daz_armature, marker_kb):
     remove_bone_keys(arm, BONE_GAPS)
     bpy.ops.mocap_gapfill.detect_gaps()
     action = arm.animation_data.action
-    scene.mocap_gapfill.kb_path = ""
-    with pytest.raises(RuntimeError, match="choose a knowledge base"):
-        bpy.ops.mocap_gapfill.fill_gaps()
     scene.mocap_gapfill.kb_path = str(marker_kb)  # markers: the wrong knowledge base
     with pytest.raises(RuntimeError, match="does not match this motion"):
         bpy.ops.mocap_gapfill.fill_gaps()
     assert arm.animation_data.action == action and arm.mocap_gapfill.recovered_action is None
     assert not any(g.filled for g in arm.mocap_gapfill.gaps)
+
+
+def test_starter_knowledge_base_when_none_is_chosen(daz_armature):
+    """No knowledge base chosen: the Daz take gets the shipped CMU Daz starter KB and is filled
+    (the original action kept)."""
+    bpy = pytest.importorskip("bpy")
+    arm, scene = daz_armature, bpy.context.scene
+    remove_bone_keys(arm, BONE_GAPS)
+    bpy.ops.mocap_gapfill.detect_gaps()
+    action = arm.animation_data.action
+    scene.mocap_gapfill.kb_path = ""
+    assert bpy.ops.mocap_gapfill.fill_gaps() == {"FINISHED"}
+    assert arm.mocap_gapfill.original_action == action
+    assert arm.mocap_gapfill.recovered_action is not None
+    assert all(g.filled for g in arm.mocap_gapfill.gaps)
 
 
 def test_mark_gap_over_preview_range(daz_armature):

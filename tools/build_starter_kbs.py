@@ -1,0 +1,33 @@
+"""Build the starter knowledge bases shipped with the extension (sample_scenes/*_kb.npz).
+
+CMU motion only (free to redistribute; HDM05 is CC BY-SA and stays out of the product):
+- cmu_daz43_kb.npz: every Daz-friendly BVH take of ../shared/data at 20 fps (43 joints);
+- cmu_markers41_kb.npz: the CMU C3D takes at 30 fps (the 41-marker set).
+Poses are stored as float16, compressed (``KnowledgeBase.save(compact=True)``).
+
+    python tools/build_starter_kbs.py
+"""
+
+import os
+from pathlib import Path
+
+from mocap_gapfill.core.kb import STARTER_DIR, build_kb
+
+DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA",
+                           Path(__file__).resolve().parents[2] / "shared" / "data"))
+STARTERS = {"cmu_daz43_kb.npz": dict(sources=[DATA / "cmu/bvh/daz_friendly"], fps=20.0,
+                                     skip_frames=6),
+            "cmu_markers41_kb.npz": dict(sources=[DATA / "cmu/c3d"], fps=30.0, skip_frames=0)}
+
+
+def main():
+    for name, spec in STARTERS.items():
+        kb = build_kb(spec["sources"], fps=spec["fps"], skip_frames=spec["skip_frames"],
+                      report=print)
+        path = kb.save(STARTER_DIR / name, overwrite=True, compact=True)
+        print(f"{path}: {kb.size} poses of {len(kb.names)} points at {kb.fps:g} fps, "
+              f"{path.stat().st_size / 1e6:.1f} MB")
+
+
+if __name__ == "__main__":
+    main()
