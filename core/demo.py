@@ -6,6 +6,9 @@ has, gets gaps: three bones lose their keys over 60-100 frames (one at the clip'
 markers vanish over 70-90 frames (one at the clip's start). The gaps are filled with the
 knowledge-base method and, for comparison, linear and spline interpolation; the RMSE against the
 known truth is printed and a plot of original vs recovered trajectories is written.
+Then the real takes shipped in ``sample_scenes/`` (CMU): the marker take 01_01 with the gaps it
+really has, and the armature take 03_02 with three bones' keys deleted, filled with the starter
+knowledge bases without their subject (:func:`run_real_demo`).
 The add-on's command line adds the Blender scenes (see ``addon/commands.py``).
 """
 
@@ -14,9 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from . import synth
-from .evaluate import rmse_mm
+from .evaluate import punch_gaps, rmse_mm, with_gaps
 from .fill import DEFAULT_METHOD, fill
-from .io import write_motion
+from .io import read_motion, write_motion
 from .kb import kb_from_motions
 from .motion import gap_runs
 from .posing import points_missing
@@ -84,9 +87,76 @@ def run_demo(outdir="out", progress=None, report=print):
             plot = write_plot(outdir / "demo_markers.svg", truth, query, filled,
                               fill(query, "linear"), "LWRA")
             report(f"plot of original vs recovered -> {plot}")
-    return {"scores": scores, "skeleton": skeleton, "markers": markers, "bone_gaps": bone_gaps,
+    real = run_real_demo(outdir, report)
+    return {"scores": scores, "real_scores": real, "skeleton": skeleton, "markers": markers,
+            "bone_gaps": bone_gaps,
             "marker_gaps": marker_miss, "kb_skeleton": outdir / "kb_skeleton.npz",
             "kb_markers": outdir / "kb_markers.npz"}
+
+
+# ---- real takes shipped in sample_scenes/ (CMU), filled with the starter knowledge bases ------
+#: CMU 01_01 (41 markers, 120 fps) with the gaps it really has (RBAC: its last 30 frames)
+REAL_MARKERS = "01_01.c3d"
+#: CMU 03_02 (Daz-friendly BVH, 120 fps) and the bones an animator deleted keys of (frames)
+REAL_ARMATURE = "03_02.bvh.gz"
+REAL_BONE_GAPS = (("lForeArm", 120, 219), ("rShin", 150, 239), ("chest", 300, 359))
+
+
+def run_real_demo(outdir="out", report=print):
+    """Fill the real sample takes with the starter knowledge bases (their subject left out, as
+    for a take the KB has never seen) and print the accuracy where the truth is known; returns
+    ``{(take, method): rmse_mm}``."""
+    from .bonefill import fill_bones
+    from .evaluate import kb_without, subject_of
+    from .formats.bvh import read_bvh_rig
+    from .kb import STARTER_DIR, starter_kb
+    from .rig import basis_matrices, interpolate_channels
+
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    scores = {}
+    take = read_motion(STARTER_DIR / REAL_MARKERS)
+    path, kb = starter_kb(take.names)
+    kb = kb_without(kb, subject_of(REAL_MARKERS))
+    report(f"real markers {REAL_MARKERS} (CMU): {take.n_frames} frames at {take.fps:g} fps, "
+           f"{int(take.missing.sum())} samples missing in {len(take.gap_runs())} real gaps; "
+           f"knowledge base {path.name} without subject {subject_of(REAL_MARKERS)} "
+           f"({kb.size} poses)")
+    filled = fill(take, DEFAULT_METHOD, kb=kb, report=report)
+    out = _write_c3d_or_npz(filled, outdir / f"{REAL_MARKERS.split('.')[0]}_filled.c3d")
+    report(f"  filled {int((take.missing & ~filled.missing).sum())} samples "
+           f"({int(filled.missing.sum())} left: points the knowledge base and the take's other "
+           f"markers cannot place) -> {out}")
+    # where the truth is known: 10 % of the markers hidden per 60 frames of the complete frames
+    truth = take.select([n for n in take.names if n in kb.names])
+    truth = truth.replace(positions=truth.positions[~truth.missing.any(axis=1)], filled=None)
+    miss = punch_gaps(truth.n_frames, truth.n_points, "markers", 0.1, np.random.default_rng(0))
+    query = with_gaps(truth, miss)
+    for method in (DEFAULT_METHOD, "rigid", "linear"):
+        scores[(REAL_MARKERS, method)] = rmse_mm(fill(query, method, kb=kb), truth, miss)
+    report("  10 % of the markers hidden per 60 frames, RMSE over them: " + ", ".join(
+        f"{m} {scores[(REAL_MARKERS, m)]:.1f} mm" for m in (DEFAULT_METHOD, "rigid", "linear")))
+
+    rig, channels, location, fps = read_bvh_rig(STARTER_DIR / REAL_ARMATURE)
+    path, kb = starter_kb(rig.names)
+    kb = kb_without(kb, subject_of(REAL_ARMATURE))
+    truth = basis_matrices(rig, channels, location)
+    gaps = np.zeros(channels.shape[:2], dtype=bool)
+    for name, a, b in REAL_BONE_GAPS:
+        gaps[a:b + 1, rig.names.index(name)] = True
+    moved = (gaps.astype(np.int64) @ rig.placed_by().astype(np.int64)) > 0
+    seen = interpolate_channels(channels, gaps)  # what Blender shows across the deleted keys
+    report(f"real armature {REAL_ARMATURE} (CMU, Daz-friendly BVH as Blender imports it): "
+           f"{len(channels)} frames at {fps:g} fps, keys deleted: "
+           + ", ".join(f"{n} {a}-{b}" for n, a, b in REAL_BONE_GAPS)
+           + f"; knowledge base {path.name} without subject {subject_of(REAL_ARMATURE)}")
+    for method in ("auto", "interp"):
+        basis = fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method)
+        err = np.linalg.norm(rig.joints(basis) - rig.joints(truth), axis=2)[moved]
+        scores[(REAL_ARMATURE, method)] = float(1000 * np.sqrt((err ** 2).mean()))
+    report(f"  joints below the gapped bones, RMSE: auto {scores[(REAL_ARMATURE, 'auto')]:.1f} mm"
+           f", Blender's own interpolation {scores[(REAL_ARMATURE, 'interp')]:.1f} mm")
+    return scores
 
 
 def _write_c3d_or_npz(motion, path):

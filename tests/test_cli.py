@@ -192,8 +192,15 @@ def test_demo_is_the_main_job(tmp_path):
         assert set(scores) == {"auto", "knn", "rigid", "linear", "spline"}
         assert scores["auto"] < 0.2 * min(scores["linear"], scores["spline"])
         assert scores["auto"] <= 1.1 * min(scores["knn"], scores["rigid"])
+    # the real CMU takes of sample_scenes/ with the starter knowledge bases
+    real = re.search(r"RMSE over them: auto ([\d.]+) mm, rigid ([\d.]+) mm, linear ([\d.]+) mm",
+                     r.stdout)
+    assert real and float(real[1]) < min(float(real[2]), 0.5 * float(real[3])), r.stdout
+    bones = re.search(r"RMSE: auto ([\d.]+) mm, Blender's own interpolation ([\d.]+) mm", r.stdout)
+    assert bones and float(bones[1]) < float(bones[2]), r.stdout
+    assert "filled 30 samples" in r.stdout  # 01_01's real gap: RBAC's last 30 frames
     for name in ("kb_skeleton.npz", "kb_markers.npz", "demo_markers.svg",
-                 "demo_markers_filled.c3d"):
+                 "demo_markers_filled.c3d", "01_01_filled.c3d"):
         assert (tmp_path / name).is_file(), name
     assert read_motion(tmp_path / "demo_markers_filled.c3d").missing.sum() == 0
     assert "<polyline" in (tmp_path / "demo_markers.svg").read_text()
