@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from . import synth
-from .evaluate import punch_gaps, rmse_mm, with_gaps
+from .evaluate import kb_without, punch_gaps, rmse_mm, subject_of, with_gaps
 from .fill import DEFAULT_METHOD, fill
 from .io import read_motion, write_motion
-from .kb import kb_from_motions
+from .kb import STARTER_DIR, kb_from_motions, starter_kb
 from .motion import gap_runs
 from .posing import points_missing
 
@@ -106,15 +106,20 @@ def run_real_demo(outdir="out", report=print):
     """Fill the real sample takes with the starter knowledge bases (their subject left out, as
     for a take the KB has never seen) and print the accuracy where the truth is known; returns
     ``{(take, method): rmse_mm}``."""
-    from .bonefill import fill_bones
-    from .evaluate import kb_without, subject_of
-    from .formats.bvh import read_bvh_rig
-    from .kb import STARTER_DIR, starter_kb
-    from .rig import basis_matrices, interpolate_channels
-
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     scores = {}
+    try:
+        import ezc3d  # noqa: F401
+    except ImportError:  # e.g. a distribution's Blender without the bundled wheels
+        report(f"ezc3d is not installed: the real marker take {REAL_MARKERS} is skipped")
+    else:
+        _real_markers(outdir, scores, report)
+    _real_armature(scores, report)
+    return scores
+
+
+def _real_markers(outdir, scores, report):
     take = read_motion(STARTER_DIR / REAL_MARKERS)
     path, kb = starter_kb(take.names)
     kb = kb_without(kb, subject_of(REAL_MARKERS))
@@ -137,6 +142,12 @@ def run_real_demo(outdir="out", report=print):
     report("  10 % of the markers hidden per 60 frames, RMSE over them: " + ", ".join(
         f"{m} {scores[(REAL_MARKERS, m)]:.1f} mm" for m in (DEFAULT_METHOD, "rigid", "linear")))
 
+
+def _real_armature(scores, report):
+    from .bonefill import fill_bones
+    from .formats.bvh import read_bvh_rig
+    from .rig import basis_matrices, interpolate_channels
+
     rig, channels, location, fps = read_bvh_rig(STARTER_DIR / REAL_ARMATURE)
     path, kb = starter_kb(rig.names)
     kb = kb_without(kb, subject_of(REAL_ARMATURE))
@@ -156,7 +167,6 @@ def run_real_demo(outdir="out", report=print):
         scores[(REAL_ARMATURE, method)] = float(1000 * np.sqrt((err ** 2).mean()))
     report(f"  joints below the gapped bones, RMSE: auto {scores[(REAL_ARMATURE, 'auto')]:.1f} mm"
            f", Blender's own interpolation {scores[(REAL_ARMATURE, 'interp')]:.1f} mm")
-    return scores
 
 
 def _write_c3d_or_npz(motion, path):
