@@ -67,13 +67,24 @@ def frame_view(frame):
     region = [r for r in area.regions if r.type == "WINDOW"][0]
     with bpy.context.temp_override(window=window, area=area, region=region):
         bpy.ops.view3d.view_selected()
+
+
+def show_mocap_tab():
+    """The sidebar on the Mocap tab (once the sidebar has drawn: its tabs exist only then)."""
+    window, area = view3d()
     ui = [r for r in area.regions if r.type == "UI"][0]
     try:
         ui.active_panel_category = "Mocap"
-    except (AttributeError, TypeError):  # read-only before 4.4: scroll the tabs (Item, Tool,
-        x, y = ui.x + ui.width // 2, window.height - (ui.y + ui.height // 2)  # View, Mocap)
-        subprocess.run(f"xdotool mousemove {x} {y} keydown ctrl click 5 click 5 click 5 "
-                       "keyup ctrl", shell=True, env={"DISPLAY": ":99"})
+        ui.tag_redraw()
+        say("sidebar tab:", ui.active_panel_category)
+    except (AttributeError, TypeError):  # read-only before 4.4: click the tab, the last one
+        # (Item, Tool, View, Mocap) in the column of tabs at the sidebar's right edge: its
+        # middle is 168 px below the sidebar's top at Blender 4.3's default scale
+        x = ui.x + ui.width - 10
+        y = window.height - (ui.y + ui.height) + 168
+        subprocess.run(f"xdotool mousemove {x} {y} click 1", shell=True,
+                       env={"DISPLAY": ":99"})
+        say("sidebar tab: clicked at", x, y)
 
 
 def context_select(obj):
@@ -93,6 +104,10 @@ def step():
     if state["step"] == 0:
         arm.mocap_gapfill.gap_index = 0
         frame_view(100)
+        state["step"] = 0.25
+        return 1.0
+    if state["step"] == 0.25:
+        show_mocap_tab()
         state["step"] = 0.5
         return 1.0
     if state["step"] == 0.5:
