@@ -15,6 +15,7 @@ buffers. Recovered keys never go into the original action: :func:`recovered_acti
 copy once and the object plays it; the original stays on the object's settings for preview.
 """
 
+import re
 from dataclasses import dataclass, field
 
 import bpy
@@ -26,6 +27,7 @@ from ..core.rig import Rig
 from . import compat
 
 MARKER_SET = "mocap_gapfill_marker_set"  # custom property on the parent empty of a marker set
+MARKER_LABEL = "mocap_gapfill_label"  # custom property of a marker: its name in the file
 TAILS = "mocap_gapfill_tails"  # custom property of armatures whose joints are bone tails
 LINEAR = 1  # Keyframe.interpolation "LINEAR" as foreach_set takes it
 ROTATION_PATHS = {"QUATERNION": ("rotation_quaternion", 4),
@@ -103,6 +105,12 @@ class Take:
     world: np.ndarray  # (4, 4) object space -> world space
     parents: tuple = None
     extra: dict = field(default_factory=dict)
+    labels: tuple = None  # the points' own names where they differ from the objects' (markers)
+
+    @property
+    def names(self):
+        """The points' names for the core (knowledge bases match these)."""
+        return self.labels or self.points
 
     def motion(self, missing):
         """A core :class:`Motion` (metres) with ``missing`` (frames, points) samples removed."""
@@ -111,7 +119,7 @@ class Take:
             limbs = skeleton_limbs(self.parents)
         else:
             limbs = rigid_marker_pairs(known)
-        return Motion(np.where(missing[..., None], np.nan, known), self.points, self.fps,
+        return Motion(np.where(missing[..., None], np.nan, known), self.names, self.fps,
                       parents=self.parents, limbs=limbs, source=self.name,
                       source_format="blender")
 
@@ -176,7 +184,13 @@ def read_markers(root, scene):
     units = root.mocap_gapfill.units
     return Take(root.name, "markers", first, tuple(c.name for c in children), pos,
                 ~np.isnan(local[..., 0]), scene_fps(scene), to_metres(units, height), world,
-                extra={"inverse": inverse})
+                extra={"inverse": inverse}, labels=tuple(marker_label(c) for c in children))
+
+
+def marker_label(obj):
+    """A marker's own name: the label it was imported with, else its object's name without the
+    ``.001`` Blender adds when a second take brings markers of the same names."""
+    return str(obj.get(MARKER_LABEL) or re.sub(r"\.\d{3}$", "", obj.name))
 
 
 def _matrices(collection, prop, count):
@@ -452,6 +466,7 @@ def import_markers(context, motion, name, first_frame=1):
     frames = np.arange(motion.n_frames) + first_frame
     for j, label in enumerate(motion.names):
         child = _link(context, bpy.data.objects.new(label, None))
+        child[MARKER_LABEL] = label  # the name may become LFHD.001 beside another take
         child.empty_display_type = "SPHERE"
         child.empty_display_size = 0.012
         child.parent = root

@@ -142,6 +142,6 @@ def take_rmse(owner, truth, scene):
 
     take = bridge.read_take(owner, scene)
     mask = gaps.take_missing(owner, take)
-    ref = truth.select(list(take.points)).positions[:len(mask)]
+    ref = truth.select(list(take.names)).positions[:len(mask)]
     err = (take.positions * take.metres - ref)[mask]
     return float(1000 * np.sqrt(np.mean(np.sum(err ** 2, axis=1))))

@@ -214,7 +214,7 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
         plan = FillPlan(owner.name, take, write, missing, ids, every, kb=kb)
         if method in NEEDS_KB and kb is None:
             try:
-                path, plan.kb = starter_kb(list(take.points))
+                path, plan.kb = starter_kb(list(take.names))
             except GapFillError as exc:
                 raise GapFillError(f"'{owner.name}': {exc}; or choose a knowledge base (Mocap "
                                    "tab > Knowledge base), or the Rigid body method for "

@@ -29,6 +29,8 @@ done
 # manifest's bundled-wheel list (cp311 wheels would make Blender refuse the extension) there
 sed -i '/^wheels = \[/,/^\]/d' "$ROOTFS/work/repo/mocap_gapfill/blender_manifest.toml"
 cp tools/gui_session.py "$ROOTFS/work/"
+# the real marker take as .npz: Debian's Blender has no ezc3d to read the C3D
+.venv/bin/mocap-gapfill convert sample_scenes/01_01.c3d "$ROOTFS/work/out/01_01.npz" --force
 for m in proc sys dev; do mountpoint -q "$ROOTFS/$m" || mount --bind "/$m" "$ROOTFS/$m"; done
 trap 'for m in dev sys proc; do umount -l "$ROOTFS/$m" 2>/dev/null || true; done' EXIT
 chroot "$ROOTFS" bash -c '

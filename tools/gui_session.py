@@ -1,8 +1,9 @@
 """Runs inside a real Blender (tools/gui_check.sh), with the add-on loaded from a local extension
 repository. In background mode (``-b -- build``) it builds the demo scene with the add-on's own
 code and saves it; in the GUI it opens that scene, fills it with the UI operator (invoked: modal,
-progress, Esc to cancel), shows the recovered motion and a ghost of the original, and takes
-screenshots. Prints 'mocap_gapfill: ...' lines."""
+progress, Esc to cancel), shows the recovered motion and a ghost of the original, builds a
+knowledge base from a folder, then imports the real CMU marker take 01_01 and fills its real gaps
+with the starter knowledge base, taking screenshots. Prints 'mocap_gapfill: ...' lines."""
 
 import subprocess
 import sys
@@ -159,9 +160,42 @@ def step():
         say("build_kb invoked:", result)
         state["step"] = 4
         return 0.1
+    if state["step"] == 4:
+        if wm.mocap_gapfill.running:
+            return 0.1
+        say("knowledge base now:", bpy.context.scene.mocap_gapfill.kb_path)
+        # the real CMU take 01_01 with the gaps it really has (converted to .npz by
+        # gui_check.sh: Debian's Blender has no ezc3d), filled with the starter knowledge base
+        with bpy.context.temp_override(window=window, area=area):
+            bpy.ops.mocap_gapfill.import_markers(filepath=f"{OUT}/01_01.npz")
+        root = bpy.data.objects["01_01"]
+        say("imported 01_01:", len(root.mocap_gapfill.gaps), "gaps:",
+            [(g.point, g.first, g.last) for g in root.mocap_gapfill.gaps])
+        bpy.context.scene.mocap_gapfill.kb_path = ""  # none chosen: the starter one
+        with bpy.context.temp_override(window=window, area=area):
+            result = bpy.ops.mocap_gapfill.fill_gaps("INVOKE_DEFAULT", scope="ALL",
+                                                     objects="01_01")
+        say("fill of 01_01 invoked:", result)
+        state["step"] = 5
+        return 0.1
     if wm.mocap_gapfill.running:
         return 0.1
-    say("knowledge base now:", bpy.context.scene.mocap_gapfill.kb_path)
+    root = bpy.data.objects["01_01"]
+    say("01_01 filled:", sum(g.filled for g in root.mocap_gapfill.gaps), "of",
+        len(root.mocap_gapfill.gaps), "gaps; showing", root.mocap_gapfill.showing)
+    if state["step"] == 5:
+        gap = next(g for g in root.mocap_gapfill.gaps if g.point == "RBAC")
+        root.mocap_gapfill.gap_index = list(root.mocap_gapfill.gaps).index(gap)
+        for o in bpy.context.view_layer.objects:
+            o.select_set(o == root or o.parent == root)
+        bpy.context.view_layer.objects.active = root
+        bpy.context.scene.frame_set((gap.first + gap.last) // 2)
+        region = [r for r in area.regions if r.type == "WINDOW"][0]
+        with bpy.context.temp_override(window=window, area=area, region=region):
+            bpy.ops.view3d.view_selected()
+        state["step"] = 6
+        return 1.0
+    shot("4_real_markers_filled")
     bpy.ops.wm.quit_blender()
     return None
 

@@ -119,6 +119,25 @@ def test_c3d_markers_detect_fill_preview(scene, data_dir, marker_kb):
     assert np.array_equal(np.isnan(original.positions[..., 0]), mask)
 
 
+def test_a_second_take_of_the_same_markers_fills_with_the_starter_kb(scene, data_dir):
+    """Imported beside another take, the markers' objects become LFHD.001...; the core still
+    sees the file's labels, so the starter knowledge base (none chosen) fits it."""
+    bpy = pytest.importorskip("bpy")
+    bridge, _, _, _ = modules()
+    path = data_dir / "cmu/c3d/01_01.c3d"  # real gaps: RBAC's last 30 frames
+    bpy.ops.mocap_gapfill.import_markers(filepath=str(path))
+    bpy.ops.mocap_gapfill.import_markers(filepath=str(path))
+    second = bpy.context.active_object
+    take = bridge.read_take(second, scene)
+    assert "LFHD.001" in take.points and "LFHD" in take.names and "LFHD.001" not in take.names
+    scene.mocap_gapfill.kb_path = ""
+    assert bpy.ops.mocap_gapfill.fill_gaps(scope="ALL", objects=second.name) == {"FINISHED"}
+    rbac = next(g for g in second.mocap_gapfill.gaps if g.point.startswith("RBAC."))
+    assert rbac.filled and rbac.last - rbac.first + 1 == 30
+    filled = bridge.read_take(second, scene)
+    assert not np.isnan(filled.positions[:, filled.points.index(rbac.point)]).any()
+
+
 def test_clicking_a_gap_selects_and_jumps(scene, data_dir):
     bpy = pytest.importorskip("bpy")
     path = data_dir / "cmu/c3d/01_01.c3d"  # real gaps
