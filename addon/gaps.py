@@ -278,7 +278,13 @@ def apply_fill(context, plans, results):
             changed = np.abs(basis - plan.take.extra["basis"]).max(axis=(2, 3)) > 1e-6
             written += bridge.write_armature(plan.take, basis, plan.write & changed)
         settings = owner.mocap_gapfill
-        for i in plan.gap_ids:
-            settings.gaps[i].filled = True
+        for i in plan.gap_ids:  # a marker gap nothing could place stays open
+            gap = settings.gaps[i]
+            if plan.take.kind == "markers":
+                j = plan.take.points.index(gap.point)
+                rows = slice(gap.first - plan.take.first, gap.last - plan.take.first + 1)
+                gap.filled = bool(np.isfinite(filled[rows, j, 0]).all())
+            else:
+                gap.filled = True
         settings.showing = "RECOVERED"
     return written

@@ -184,10 +184,10 @@ def step():
     say("01_01 filled:", sum(g.filled for g in root.mocap_gapfill.gaps), "of",
         len(root.mocap_gapfill.gaps), "gaps; showing", root.mocap_gapfill.showing)
     if state["step"] == 5:
-        gap = next(g for g in root.mocap_gapfill.gaps if g.point == "RBAC")
+        gap = next(g for g in root.mocap_gapfill.gaps if g.point.split(".")[0] == "RBAC")
         root.mocap_gapfill.gap_index = list(root.mocap_gapfill.gaps).index(gap)
-        for o in bpy.context.view_layer.objects:
-            o.select_set(o == root or o.parent == root)
+        for o in bpy.context.view_layer.objects:  # frame the markers (the root is at 0)
+            o.select_set(o.parent == root)
         bpy.context.view_layer.objects.active = root
         bpy.context.scene.frame_set((gap.first + gap.last) // 2)
         region = [r for r in area.regions if r.type == "WINDOW"][0]
