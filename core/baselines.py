@@ -193,13 +193,13 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     out = pos.copy()
     spreads = np.full(seen.shape, np.nan)
     stats = {} if cache is None else cache
+    partners = pos if partners is None else np.asarray(partners, dtype=np.float64)
     for p, a, b in gap_runs(~seen):
         ends = _gap_ends(a, b, frames)
         if not ends:
             continue
         if p not in stats:
-            ref = pos if partners is None else np.asarray(partners, dtype=np.float64)
-            stats[p] = _pair_stats(ref, p, np.isfinite(ref[..., 0]))[0]
+            stats[p] = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
         spread = stats[p]
         order = np.array([q for q in np.argsort(spread) if np.isfinite(spread[q])
                           and seen[ends, q].all()], dtype=np.int64)
@@ -212,8 +212,8 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
         first = ok & (np.cumsum(ok, axis=1) <= donors)
         full = first.sum(axis=1) == donors
         sets, which = np.unique(first[full], axis=0, return_inverse=True)
-        for k, pick in enumerate(sets):
-            chosen, rows = order[pick], np.flatnonzero(full)[which.ravel() == k]
+        for s, pick in enumerate(sets):
+            chosen, rows = order[pick], np.flatnonzero(full)[which.ravel() == s]
             w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(donors)
             w = (w / w.sum())[:, None]
             cur = pos[a + rows][:, chosen]  # (t, donors, 3)

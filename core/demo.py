@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import synth
-from .evaluate import kb_without, punch_gaps, rmse_mm, subject_of, with_gaps
+from .evaluate import complete_take, kb_without, punch_gaps, rmse_mm, subject_of, with_gaps
 from .fill import DEFAULT_METHOD, fill
 from .io import read_motion, write_motion
 from .kb import STARTER_DIR, kb_from_motions, starter_kb
@@ -133,8 +133,7 @@ def _real_markers(outdir, scores, report):
            f"({int(filled.missing.sum())} left: points the knowledge base and the take's other "
            f"markers cannot place) -> {out}")
     # where the truth is known: 10 % of the markers hidden per 60 frames of the complete frames
-    truth = take.select([n for n in take.names if n in kb.names])
-    truth = truth.replace(positions=truth.positions[~truth.missing.any(axis=1)], filled=None)
+    truth = complete_take(take, kb.names)
     miss = punch_gaps(truth.n_frames, truth.n_points, "markers", 0.1, np.random.default_rng(0))
     query = with_gaps(truth, miss)
     for method in (DEFAULT_METHOD, "rigid", "linear"):
@@ -155,7 +154,7 @@ def _real_armature(scores, report):
     gaps = np.zeros(channels.shape[:2], dtype=bool)
     for name, a, b in REAL_BONE_GAPS:
         gaps[a:b + 1, rig.names.index(name)] = True
-    moved = (gaps.astype(np.int64) @ rig.placed_by().astype(np.int64)) > 0
+    moved = rig.moved(gaps)
     seen = interpolate_channels(channels, gaps)  # what Blender shows across the deleted keys
     report(f"real armature {REAL_ARMATURE} (CMU, Daz-friendly BVH as Blender imports it): "
            f"{len(channels)} frames at {fps:g} fps, keys deleted: "

@@ -165,12 +165,7 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
     total = len(tests) * len(chosen) * len(methods)
     done = 0
     for test in tests:
-        truth = _at_rate(read_motion(test, skip_frames=skip_frames), fps)
-        common = [n for n in truth.names if n in full_kb.names]
-        truth = truth.select(common)
-        if truth.missing.any():
-            keep = ~truth.missing.any(axis=1)
-            truth = truth.replace(positions=truth.positions[keep])
+        truth = complete_take(read_motion(test, skip_frames=skip_frames), full_kb.names, fps)
         kb = kb_without(full_kb, subject_of(test))
         for label, setting in chosen:
             rng = np.random.default_rng([seed, *label.encode()])
@@ -196,6 +191,14 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
 def _at_rate(motion, fps):
     return motion.replace(positions=resample(motion.positions, motion.fps, fps), fps=fps,
                           filled=None)
+
+
+def complete_take(motion, names, fps=None):
+    """The truth a protocol punches gaps into: the motion at ``fps`` (default: its own rate),
+    its points that ``names`` (a knowledge base's) has, its complete frames only."""
+    motion = _at_rate(motion, fps or motion.fps)
+    motion = motion.select([n for n in motion.names if n in names])
+    return motion.replace(positions=motion.positions[~motion.missing.any(axis=1)])
 
 
 def table(results):
@@ -287,7 +290,7 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
             punched = punch_bone_gaps(len(channels), candidates, setting, rng)
             gaps[:, :punched.shape[1]] = punched
             seen = interpolate_channels(channels, gaps)
-            unknown = (gaps.astype(np.int64) @ below.astype(np.int64)) > 0
+            unknown = rig.moved(gaps)
             for method in methods:
                 start = time.perf_counter()
                 basis = fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method,

@@ -94,6 +94,11 @@ class Rig:
             below |= np.eye(n, dtype=bool) & ~self.roots[:, None]
         return below
 
+    def moved(self, gaps):
+        """(frames, joints) bool: the joints that the bones gapped in ``gaps`` (frames, bones)
+        move at each frame."""
+        return (gaps.astype(np.int64) @ self.placed_by().astype(np.int64)) > 0
+
 
 def rotations(channels, modes):
     """Rotation matrices (frames, bones, 3, 3) of rotation channels (frames, bones, 4)."""

@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from mocap_gapfill.core.evaluate import (kb_without, punch_gaps, settings_of, subject_of,
-                                         with_gaps)
+from mocap_gapfill.core.evaluate import (complete_take, kb_without, punch_gaps, settings_of,
+                                         subject_of, with_gaps)
 from mocap_gapfill.core.fill import fill, validation_gaps
 from mocap_gapfill.core.io import read_motion
-from mocap_gapfill.core.kb import build_kb, resample
+from mocap_gapfill.core.kb import build_kb
 
 DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -44,11 +44,8 @@ def main(protocol, out, only=None):
     out.mkdir(parents=True, exist_ok=True)
     full = build_kb(run["kb"], fps=run["fps"], skip_frames=run["skip"], exclude=run["exclude"])
     for path in run["takes"]:
-        truth = read_motion(path, skip_frames=run["skip"])
-        truth = truth.replace(positions=resample(truth.positions, truth.fps, run["fps"]),
-                              fps=run["fps"], filled=None)
-        truth = truth.select([n for n in truth.names if n in full.names])
-        truth = truth.replace(positions=truth.positions[~truth.missing.any(axis=1)])
+        truth = complete_take(read_motion(path, skip_frames=run["skip"]), full.names,
+                              run["fps"])
         kb = kb_without(full, subject_of(path))
         for label, setting in settings_of(protocol):
             rng = np.random.default_rng([0, *label.encode()])
