@@ -1,7 +1,7 @@
 """Where the heavy arithmetic runs: numpy, or torch on the CPU or a CUDA GPU.
 
-The method is written once (``search.py``, ``recover.py``); a backend only does the two
-operations that dominate its time, on plain numpy arrays in and out:
+The method is written once (``search.py``, ``models.py``, ``energy.py``); a backend only does
+the two operations that dominate its time, on plain numpy arrays in and out:
 
 - ``smallest(lhs, k)``: the product ``lhs @ rhs`` with the knowledge-base matrix ``rhs`` it was
   prepared with, and the ``k`` smallest entries of each row (any order);

@@ -187,7 +187,8 @@ def _model_and_fill(base, take, names, rng, quick, repeat, add):
     from .fill import fill
     from .kb import KnowledgeBase
     from .motion import Motion
-    from .recover import KnnSettings, _closed_form, _local_pca, _normal_equations
+    from .energy import closed_form, normal_equations
+    from .models import KnnSettings, local_pca
     from .search import KBIndex
 
     frames_list = (2048,) if quick else (512, 2048)
@@ -207,9 +208,9 @@ def _model_and_fill(base, take, names, rng, quick, repeat, add):
 
                 def model():  # gathers the neighbours as a fill does (centred in place)
                     neighbours = poses.reshape(size, -1)[idx]
-                    mean, comps, lams, noise = _local_pca(neighbours, settings, rng,
+                    mean, comps, lams, noise = local_pca(neighbours, settings, rng,
                                                           index.backend)
-                    _closed_form(_normal_equations(~present, q, mean, comps), lams, noise,
+                    closed_form(normal_equations(~present, q, mean, comps), lams, noise,
                                  settings)
 
                 median, peak = timed(model, repeat)

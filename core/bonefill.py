@@ -9,17 +9,24 @@ frames:
 
 - ``hermite``: each channel a cubic from the key before the gap to the key after it, leaving and
   arriving with the velocities the keys show (damped on gaps over ``HERMITE_SECONDS``);
-- ``knn``: the knowledge base near ``hermite``: the local models of :mod:`.recover`, fitted to
-  the K nearest poses over every joint, pull the joints the gaps move towards likely poses, the
-  more the further a frame lies from a key (:func:`~.recover.soft_poses`, the take's own
-  complete poses added to the KB); then, top-down, each gapped bone takes the rotation that
-  best carries its rigid subtree - its descendants posed by their own keys - onto those joints
-  (:func:`carry_subtrees`). Limb lengths are exact by construction;
-- ``auto`` (the default): per gap, half-way from ``interp`` to ``knn``, or ``knn``, or ``recall``
-  (subtrees carried onto the knowledge base's guess from the known joints alone: a KB that holds
-  the motion), or ``interp``,
-  as copies of the gap - same bone, same length, placed where the bone is keyed - refilled by each
-  say (:meth:`_Job.auto`);
+- ``match``: motion matching in rotation space (:func:`~.matching.match_windows`): the
+  knowledge-base windows of consecutive poses whose bone rotations move most like the take's
+  over the gap and half a second either side (where the gapped bones are keyed too), at a few
+  playback speeds; each gapped bone takes the windows' mean rotation, times an offset slerped
+  across the gap from what meets the keys at either end. Needs a knowledge base built from
+  armature takes of the same skeleton (``KnowledgeBase.turns``). The take's own stretches
+  with every key in place are searched too;
+- ``knn``: the knowledge base's joint positions near ``hermite``: the local models of
+  :mod:`.recover`, fitted to the K nearest poses over every joint, pull the joints the gaps
+  move towards likely poses, the more the further a frame lies from a key
+  (:func:`~.models.soft_poses`, the take's own complete poses added to the KB); then,
+  top-down, each gapped bone takes the rotation that best carries its rigid subtree - its
+  descendants posed by their own keys - onto those joints (:func:`carry_subtrees`);
+- ``auto`` (the default): per gap ``match``, ``mix`` (half-way from ``hermite`` to ``match``)
+  or ``interp``, as copies of the gap - same bone, same length, placed where the bone is
+  keyed - refilled by each say (:meth:`_Job.auto`); with a knowledge base of positions only,
+  ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees carried onto
+  the knowledge base's guess from the known joints alone: a KB that holds the motion) stand in;
 - ``slerp``: quaternion slerp between the rotations at the keys either side;
 - ``positions``: the position-space fill of every joint below a gap, then each gapped bone turned
   to its children's filled joints (what the add-on did before; kept for comparison).
@@ -34,25 +41,33 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from .errors import GapFillError
 from .kb import match_names
-from .motion import Motion, gap_runs, skeleton_limbs
+from .motion import Motion, blend_into_gaps, gap_runs, skeleton_limbs
 from .posing import best_rotation, child_handles, forward, order_bones, rotation_between, \
     solve_pose, tail_handles
-from .recover import blend_into_gaps
-from .rig import basis_matrices, hermite_channels, interpolate_channels
+from .rig import aligned_turns, basis_matrices, basis_turns, hermite_channels, \
+    interpolate_channels
 
-BONE_METHODS = ("auto", "knn", "interp", "hermite", "slerp", "positions")
+BONE_METHODS = ("auto", "knn", "match", "interp", "hermite", "slerp", "positions")
 #: the methods that are not the project's own (``interp`` is Blender's own interpolation)
 BONE_BASELINES = ("interp", "hermite", "slerp")
-#: what ``auto`` chooses from, per gap
-AUTO_CANDIDATES = ("interp", "half", "knn", "recall")
-NEEDS_KB = ("auto", "knn", "positions")
-#: ``auto`` takes ``knn`` for a gap where its error on the gap's copies is below this share of
-#: interpolation's (and below ``half``'s), interpolation where ``half``'s is above ``DEMOTE``
-#: times it (tuned on non-test subjects, docs/METHOD_NOTES.md)
-PROMOTE = 0.6
-DEMOTE = 1.1
+#: every candidate a gap can take (``half``: half-way from ``interp`` to ``knn``; ``recall``:
+#: the subtree carried onto the knowledge base's guess from the known joints alone; ``mix``:
+#: half-way from ``hermite`` to ``match``)
+CANDIDATES = ("interp", "hermite", "knn", "half", "recall", "match", "mix")
+#: what ``auto`` chooses from beside ``interp``: with a knowledge base of bone rotations, and
+#: without one (built from positions alone, or by an older version)
+AUTO_CANDIDATES = ("match", "mix")
+AUTO_POSITIONS = ("knn", "half", "recall")
+NEEDS_KB = ("auto", "knn", "match", "positions")
+#: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
+#: of interpolation's (the better candidate where both are; tuned on non-test subjects,
+#: docs/METHOD_NOTES.md)
+PROMOTE = 0.8
 #: weight (in copies) of the take's mean over all copies in each gap's score
-SHRINK = 2.0
+SHRINK = 1.0
+#: where no gap of a take could be copied: ``match`` for gaps of at least this many seconds,
+#: ``mix`` for shorter ones (``half`` for all without bone rotations)
+LONG_GAP = 1.0
 #: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
 AUTO_COPIES = 3
 COPY_MARGIN = 10
@@ -64,6 +79,12 @@ GUESS_SPEED = 0.1
 #: weight of the current (interpolated) rotation in each gapped bone's fit, as a share of the
 #: fitted joints' spread about the bone's head (pseudo-points; tuned, docs/METHOD_NOTES.md)
 STAY = 0.5
+#: seconds of context either side of a gap that ``match`` compares, and how much the gapped
+#: bones count there against any other bone
+MATCH_CONTEXT = 0.5
+MATCH_CONTEXT_WEIGHT = 4.0
+MATCH_OWN = True
+MATCH_DAMP = True
 
 
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
@@ -103,6 +124,9 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
         raise GapFillError(f"method {method!r} needs a knowledge base")
     if method in NEEDS_KB:
         match_names(kb, rig.names)  # a knowledge base of another skeleton: a clear error now
+    if method == "match" and kb.turns is None:
+        raise GapFillError("method 'match' needs a knowledge base with bone rotations: build it "
+                           "with 'kb build' from BVH or ASF/AMC takes of this skeleton")
     gaps = np.asarray(gaps, dtype=bool)
     if gaps.shape != channels.shape[:2]:
         raise GapFillError(f"gaps have shape {gaps.shape}, the take {channels.shape[:2]}")
@@ -121,6 +145,8 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
         return job.positions(seen, job.for_kb(gaps))
     if method == "knn":
         return job.knn(job.hermite(channels, location, gaps), job.for_kb(gaps))
+    if method == "match":
+        return job.match(seen, job.for_kb(gaps))
     return job.auto(channels, location, gaps)
 
 
@@ -166,8 +192,8 @@ class _Job:
     def refine(self, basis, gaps):
         """The local models' most likely joints near what the F-curves show: each joint a gap
         leaves unknown is trusted to within ``GUESS_SPEED`` times its time to the nearest key
-        (:func:`~.recover.soft_poses`); armature space, NaN where known."""
-        from .recover import KnnSettings, soft_poses
+        (:func:`~.models.soft_poses`); armature space, NaN where known."""
+        from .models import KnnSettings, soft_poses
 
         unknown = self.unknown(gaps)
         doubt = np.zeros(gaps.shape)
@@ -222,6 +248,67 @@ class _Job:
         return carry_subtrees(self.rig, basis, gaps, self.refine(basis, gaps), self.moves,
                               self.below)
 
+    def match(self, basis, gaps):
+        """Gapped bones turned as the knowledge-base windows that move most like the take around
+        each gap (:func:`~.matching.match_windows`, in rotation space): the windows' mean
+        rotation of each gapped bone, times an offset slerped across the gap from what it takes
+        to meet the keys at either end. Needs a knowledge base with bone rotations; bones it
+        lacks keep ``basis``."""
+        from .matching import match_windows
+
+        kb, rig = self.kb, self.rig
+        bones = [b for b, name in enumerate(rig.names) if name in kb.bones and not rig.roots[b]]
+        out = np.array(basis, dtype=float)
+        gap = gaps[:, bones]
+        if not gap.any():
+            return out
+        turns = aligned_turns(rig, basis)[:, bones]
+        features = turns[..., :2].reshape(len(turns), len(bones), 6)
+        kb_turns = kb.turns[:, [kb.bones.index(rig.names[b]) for b in bones]]
+        kb_features = Rotation.from_quat(kb_turns.reshape(-1, 4)).as_matrix()[..., :2] \
+            .reshape(len(kb_turns), len(bones), 6).astype(np.float32)
+        margin = int(round(MATCH_CONTEXT * self.fps))
+        frames = len(gaps)
+        busy = [(a, e) for _, a, e in gap_runs(gap.any(axis=1)[:, None])]
+        stretches = [(max(0, a - margin), min(frames - 1, e + margin)) for a, e in busy]
+        weight = np.where(gap, 0.0, 1.0)
+        near = np.zeros_like(gap)
+        for lo, hi in stretches:
+            near[lo:hi + 1] = gap[lo:hi + 1].any(axis=0)
+        weight[near & ~gap] = MATCH_CONTEXT_WEIGHT
+        # the take's own stretches with every key in place: the same subject, the same style
+        own, own_source = _resampled_runs(features, ~gaps.any(axis=1), self.fps / kb.fps)
+        if MATCH_OWN and len(own):
+            kb_features = np.concatenate([kb_features, own.astype(np.float32)])
+            source = np.concatenate([kb.source_index, own_source + kb.source_index.max() + 1])
+        else:
+            source = kb.source_index
+        predicted = match_windows(features, weight, kb_features, source, self.fps, kb.fps,
+                                  stretches)
+        for (first, last), (lo, hi), mean in zip(busy, stretches, predicted):
+            if mean is None:
+                continue
+            pred = _orthonormal(mean)
+            for i, a, e in gap_runs(gap[first:last + 1]):
+                a, e = a + first, e + first
+                ends = [t for t in (a - 1, e + 1) if lo <= t <= hi and not gap[t, i]]
+                if not ends:
+                    continue
+                offsets = Rotation.from_matrix(
+                    [turns[t, i] @ pred[t - lo, i].T for t in ends])
+                span = np.arange(a, e + 1)
+                shape = pred[a - lo:e - lo + 1, i]
+                if len(ends) == 2:
+                    offset = Slerp(ends, offsets)(span).as_matrix()
+                    if MATCH_DAMP:
+                        shape = _damped(shape, pred[:, i], turns[lo:hi + 1, i],
+                                        ~gap[lo:hi + 1, i], a - lo, e - lo)
+                else:
+                    offset = offsets.as_matrix()[[0] * len(span)]
+                filled = offset @ shape
+                out[a:e + 1, bones[i], :3, :3] = basis_turns(rig, filled, bones[i])
+        return out
+
     def positions(self, basis, gaps):
         targets = self.predict(basis, gaps)
         targets = np.where(np.isnan(targets), self.rig.joints(basis), targets)
@@ -247,27 +334,42 @@ class _Job:
                               hermite_channels(location, moving, damping))
 
     def candidates(self, channels, location, gaps, names):
-        """Basis matrices of the named candidates (of :data:`AUTO_CANDIDATES`) for these gaps."""
+        """Basis matrices of the named candidates (of :data:`CANDIDATES`) for these gaps."""
         out = {"interp": basis_matrices(self.rig, channels, location)}
+        fillable = self.for_kb(gaps)
+        if {"hermite", "knn", "half", "mix"} & set(names):
+            out["hermite"] = self.hermite(channels, location, gaps)
         if {"knn", "half"} & set(names):
-            out["knn"] = self.knn(self.hermite(channels, location, gaps), self.for_kb(gaps))
+            out["knn"] = self.knn(out["hermite"], fillable)
             out["half"] = halfway(out["interp"], out["knn"], gaps)
+        if {"match", "mix"} & set(names) and self.kb.turns is not None:
+            out["match"] = self.match(out["interp"], fillable)
+            if "mix" in names:
+                out["mix"] = halfway(out["hermite"], out["match"], gaps)
         if "recall" in names:
-            fillable = self.for_kb(gaps)
             out["recall"] = carry_subtrees(self.rig, out["interp"], fillable,
                                            self.predict(out["interp"], fillable), self.moves,
                                            self.below, stay=0.0)
-        return out
+        return {name: basis for name, basis in out.items() if name in names}
 
     def auto(self, channels, location, gaps):
-        """Per gap: ``half`` (half-way from Blender's interpolation to ``knn``) unless the
-        copies of the gap say otherwise: ``knn`` or ``half`` where the better of them refills
-        the copies below :data:`PROMOTE` of interpolation's error and below ``half``'s,
-        interpolation where ``half`` refills them worse than :data:`DEMOTE` times it."""
+        """Per gap, the candidate (:data:`AUTO_CANDIDATES`, or :data:`AUTO_POSITIONS` where the
+        knowledge base holds no bone rotations) that refills copies of the gap - same bone,
+        same length, where the bone is keyed - best, if it does so below :data:`PROMOTE` of
+        interpolation's error; interpolation otherwise. A gap without copies is scored on the
+        take's copies of other gaps; a take without any takes ``match`` on gaps of
+        :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all)."""
         seen = basis_matrices(self.rig, channels, location)
+        rotations = self.kb.turns is not None
+        if not rotations:
+            self.report("auto: the knowledge base holds no bone rotations (built from markers "
+                        "or by an older version): filled from its joint positions; rebuild it "
+                        "with 'kb build' from BVH or ASF/AMC takes for the rotation fill")
+        names = AUTO_CANDIDATES if rotations else AUTO_POSITIONS
         copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
         runs = gap_runs(gaps)
-        choice = ["half"] * len(runs)
+        choice = [names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps else names[1]
+                  for _, a, e in runs]
         if copies:
             probe = np.zeros_like(gaps)
             for _, b, start, length in copies:
@@ -275,25 +377,22 @@ class _Job:
             hidden = interpolate_channels(channels, probe)
             hidden_loc = np.where((probe & self.moves)[..., None],
                                   interpolate_channels(location, probe), location)
-            tried = self.candidates(hidden, hidden_loc, gaps | probe, AUTO_CANDIDATES)
+            tried = self.candidates(hidden, hidden_loc, gaps | probe, ("interp",) + names)
             truth = self.world(seen)
             errors = {name: self._errors(basis, truth, copies) for name, basis in tried.items()}
             # log error ratio to interpolation per copy (1 mm^2 per joint and frame keeps still
             # bones at 0); per gap the mean over its copies, shrunk towards the take's mean
             floor = np.array([1e-6 * c[3] * (self.below[c[1]].sum() + 1) for c in copies])
             owner = np.array([c[0] for c in copies])
-            for i in np.unique(owner):
-                score = {}
-                for name in ("half", "knn", "recall"):
-                    ratio = np.log((errors[name] + floor) / (errors["interp"] + floor))
-                    score[name] = ((ratio[owner == i].sum() + SHRINK * ratio.mean())
-                                   / ((owner == i).sum() + SHRINK))
-                strong = min(("knn", "recall"), key=score.get)
-                if score[strong] < min(score["half"], np.log(PROMOTE)):
-                    choice[i] = strong
-                elif score["half"] > np.log(DEMOTE):
-                    choice[i] = "interp"
-        counts = {name: choice.count(name) for name in AUTO_CANDIDATES if choice.count(name)}
+            ratio = {name: np.log((errors[name] + floor) / (errors["interp"] + floor))
+                     for name in names}
+            for i in range(len(runs)):
+                own = owner == i
+                score = {name: (r[own].sum() + SHRINK * r.mean()) / (own.sum() + SHRINK)
+                         for name, r in ratio.items()}
+                best = min(score, key=score.get)
+                choice[i] = best if score[best] < np.log(PROMOTE) else "interp"
+        counts = {name: choice.count(name) for name in ("interp",) + names if choice.count(name)}
         self.report("auto: " + ", ".join(f"{name} on {n} of {len(runs)} gaps"
                                          for name, n in counts.items()))
         wanted = np.zeros_like(gaps)
@@ -373,6 +472,54 @@ def carry_subtrees(rig, basis, gaps, targets, moves, below=None, stay=STAY):
         smallest = rotation_between(mean_y, w.sum(axis=1)) @ current
         basis[frames, b, :3, :3] = np.where(determined[:, None, None], turn, smallest)
     return basis
+
+
+def _damped(shape, pred, seen, known, a, e):
+    """The windows' rotations over a gap (frames a..e of the stretch), their turn away from the
+    slerp between their ends scaled by how fast the take's bone turns beside the gap against
+    how fast the windows' does there (at most 1): a bone the take holds still stays still."""
+    pairs = [t for t in range(len(pred) - 1)
+             if known[t] and known[t + 1] and not a - 1 <= t <= e]
+    if not pairs:
+        return shape
+
+    def speed(r):
+        rel = np.einsum("tji,tjk->tik", r[pairs], r[[t + 1 for t in pairs]])
+        return np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1)).sum()
+
+    share = min(1.0, speed(seen) / max(speed(pred), 1e-9))
+    if share >= 1.0:
+        return shape
+    span = np.arange(a, e + 1)
+    line = Slerp([a - 1, e + 1], Rotation.from_matrix(pred[[a - 1, e + 1]]))(span).as_matrix()
+    turn = Rotation.from_matrix(shape @ np.swapaxes(line, 1, 2)).as_rotvec() * share
+    return Rotation.from_rotvec(turn).as_matrix() @ line
+
+
+def _resampled_runs(values, keep, step):
+    """``values`` (frames, ...) sampled every ``step`` frames (linear) along each run of
+    ``keep``, and the run each sample belongs to."""
+    out, source = [], []
+    for i, (_, a, e) in enumerate(gap_runs(keep[:, None])):
+        times = a + step * np.arange(int((e - a) / step) + 1)
+        i0 = np.floor(times).astype(int)
+        i1 = np.minimum(i0 + 1, e)
+        part = (times - i0).reshape((-1,) + (1,) * (values.ndim - 1))
+        out.append(values[i0] * (1 - part) + values[i1] * part)
+        source.append(np.full(len(times), i))
+    if not out:
+        return np.zeros((0,) + values.shape[1:]), np.zeros(0, int)
+    return np.concatenate(out), np.concatenate(source)
+
+
+def _orthonormal(six):
+    """Rotation matrices (..., 3, 3) nearest in Gram-Schmidt's sense to the first two columns
+    given as (..., 6) (row-major of a (3, 2) block)."""
+    cols = six.reshape(six.shape[:-1] + (3, 2))
+    x = cols[..., 0] / np.linalg.norm(cols[..., 0], axis=-1, keepdims=True)
+    y = cols[..., 1] - (x * cols[..., 1]).sum(axis=-1, keepdims=True) * x
+    y /= np.linalg.norm(y, axis=-1, keepdims=True)
+    return np.stack([x, y, np.cross(x, y)], axis=-1)
 
 
 def halfway(start, end, gaps, share=0.5):

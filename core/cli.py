@@ -191,7 +191,7 @@ def _long_gaps(motion, max_gap):
 def cmd_evaluate(args):
     from .evaluate import evaluate, table
 
-    if not args.kb_sources and not (args.kb and args.protocol != "bones"):
+    if not args.kb_sources and not args.kb:
         raise GapFillError("give the knowledge base: --kb-sources PATH... (or --kb KB.npz)")
     progress = Progress(args.quiet)
     if args.protocol == "bones":
@@ -206,7 +206,7 @@ def cmd_evaluate(args):
         results = evaluate_bones(args.test, args.kb_sources, methods, kb_fps=args.fps,
                                  seed=args.seed, k=args.k, skip_frames=args.skip_frames,
                                  settings=args.settings, exclude=args.exclude_kb or (),
-                                 progress=progress, report=_report)
+                                 kb_file=args.kb, progress=progress, report=_report)
     else:
         default, baselines = DEFAULT_METHOD, BASELINES
         unknown = sorted(set(args.methods or ()) - set(METHODS))

@@ -21,9 +21,9 @@ import numpy as np
 
 from .errors import GapFillError
 from .fill import METHODS, fill
-from .kb import KnowledgeBase, build_kb, load_kb, resample
+from .kb import build_kb, load_kb, resample
 from .motion import gap_runs
-from .io import read_motion
+from .io import read_motion, read_rig_take
 from .recover import KnnSettings
 
 JOINT_SETTINGS = [(m, l) for m in (3, 6) for l in (15, 30, 60, 90, 120)]
@@ -145,8 +145,7 @@ def kb_without(kb, subject):
     keep = keep_sources[kb.source_index]
     if not keep.any():
         raise GapFillError(f"the knowledge base holds only subject {subject}")
-    return KnowledgeBase(kb.poses[keep], kb.names, kb.fps, kb.limbs, kb.sources,
-                         kb.source_index[keep])
+    return kb.subset(keep)
 
 
 def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=None,
@@ -245,21 +244,8 @@ def punch_bone_gaps(n_frames, candidates, setting, rng):
     return gaps
 
 
-def read_rig_take(path, skip_frames=0):
-    """A take as an armature: ``(rig, channels, location, fps)``; BVH through Blender's importer
-    rules, ASF/AMC through the add-on's import (one bone per segment, quaternions)."""
-    from .formats.bvh import read_bvh_rig
-    from .rig import rig_from_motion
-
-    name = str(path).lower()
-    if name.endswith((".bvh", ".bvh.gz")):
-        return read_bvh_rig(path, skip_frames=skip_frames)
-    motion = read_motion(path, skip_frames=skip_frames)
-    return (*rig_from_motion(motion), motion.fps)
-
-
 def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip_frames=0,
-                   settings=None, exclude=(), progress=None, report=None):
+                   settings=None, exclude=(), kb_file=None, progress=None, report=None):
     """Protocol ``bones``: rotation gaps on armature takes at their own frame rate, every method
     of :data:`~.bonefill.BONE_METHODS` on identical gaps, the test subject out of the KB.
 
@@ -270,8 +256,8 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
     from .rig import basis_matrices, interpolate_channels
 
     report = report or (lambda message: None)
-    full_kb = build_kb(kb_sources, fps=kb_fps, skip_frames=skip_frames, exclude=exclude,
-                       report=report)
+    full_kb = load_kb(kb_file) if kb_file else build_kb(
+        kb_sources, fps=kb_fps, skip_frames=skip_frames, exclude=exclude, report=report)
     chosen = [(f"n={n},l={l}", (n, l)) for n, l in BONE_SETTINGS
               if settings is None or f"n={n},l={l}" in settings]
     results = []

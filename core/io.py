@@ -23,7 +23,7 @@ READ_FORMATS = (".c3d", ".bvh", ".bvh.gz", ".amc", ".npz", ".csv")
 WRITE_FORMATS = (".c3d", ".npz", ".csv")
 
 
-def _suffix(path):
+def file_suffix(path):
     name = Path(path).name.lower()
     return ".bvh.gz" if name.endswith(".bvh.gz") else Path(name).suffix
 
@@ -63,7 +63,7 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=N
     path = Path(path)
     if not path.is_file():
         raise ParseError("no such file" if not path.exists() else "not a file", path)
-    suffix = _suffix(path)
+    suffix = file_suffix(path)
     if suffix in (".bvh", ".bvh.gz"):
         from .formats.bvh import read_bvh
 
@@ -100,6 +100,25 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=N
     return motion
 
 
+RIG_FORMATS = (".bvh", ".bvh.gz", ".amc")
+
+
+def read_rig_take(path, skip_frames=0):
+    """A take as an armature: ``(rig, channels, location, fps)``; BVH through Blender's importer
+    rules, ASF/AMC through the add-on's import (one bone per segment, quaternions)."""
+    from .formats.bvh import read_bvh_rig
+    from .rig import rig_from_motion
+
+    suffix = file_suffix(path)
+    if suffix not in RIG_FORMATS:
+        raise ParseError(f"a {suffix or 'file'} holds no armature; armature takes: "
+                         f"{', '.join(RIG_FORMATS)}", path)
+    if suffix in (".bvh", ".bvh.gz"):
+        return read_bvh_rig(path, skip_frames=skip_frames)
+    motion = read_motion(path, skip_frames=skip_frames)
+    return (*rig_from_motion(motion), motion.fps)
+
+
 @contextmanager
 def atomic_output(path, overwrite=False):
     """A temporary path beside ``path`` to write to; renamed onto ``path`` when the block ends
@@ -113,7 +132,7 @@ def atomic_output(path, overwrite=False):
         raise GapFillError(f"{path} exists; pass overwrite (--force) to replace it")
     if not path.parent.is_dir():
         raise GapFillError(f"folder {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{_suffix(path)}",
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{file_suffix(path)}",
                                dir=path.parent)
     os.close(fd)
     try:
@@ -133,7 +152,7 @@ def write_motion(motion, path, overwrite=False):
         Unknown extension, an existing file without ``overwrite``, or data the format cannot hold.
     """
     path = Path(path)
-    suffix = _suffix(path)
+    suffix = file_suffix(path)
     if suffix not in WRITE_FORMATS:
         raise GapFillError(f"cannot write {suffix or 'files without extension'}; writable: "
                            f"{', '.join(WRITE_FORMATS)}")

@@ -2,7 +2,10 @@
 
 File arrays: ``format_version``, ``poses`` float32 (poses, points, 3) metres in the normalised
 frame, ``names``, ``fps``, ``limbs``, ``sources`` (one string per source file), ``source_index``
-(int32 per pose: which source), ``reference`` (JSON: root/left/right point names).
+(int32 per pose: which source), ``reference`` (JSON: root/left/right point names); built from
+BVH takes also ``bones`` and ``turns`` float32 (poses, bones, 4): each bone's
+rotation in its parent's frame with the rest axes taken out (:func:`~.rig.aligned_turns`), as
+quaternions (x, y, z, w), for filling armature gaps in rotation space.
 """
 
 import fnmatch
@@ -14,7 +17,8 @@ import numpy as np
 
 from .errors import GapFillError, ParseError
 from .formats.tabular import load_arrays, scalar, strings
-from .io import READ_FORMATS, atomic_output, read_motion
+from .io import (READ_FORMATS, atomic_output, file_suffix, read_motion,
+                 read_rig_take)
 from .normalize import find_reference, frames_of, normalize
 from .upright import upright_warning
 
@@ -35,6 +39,10 @@ class KnowledgeBase:
     limbs : ndarray, shape (limbs, 2), int
     sources : tuple of str
     source_index : ndarray, shape (poses,), int32
+    bones : tuple of str
+        Bones with ``turns`` (empty for marker knowledge bases).
+    turns : ndarray, shape (poses, bones, 4), float32, or None
+        Quaternions (x, y, z, w) of :func:`~.rig.aligned_turns`, per pose and bone.
     """
 
     poses: np.ndarray
@@ -43,6 +51,8 @@ class KnowledgeBase:
     limbs: np.ndarray
     sources: tuple
     source_index: np.ndarray
+    bones: tuple = ()
+    turns: np.ndarray = None
 
     @property
     def size(self):
@@ -67,14 +77,24 @@ class KnowledgeBase:
 
     def summary(self):
         return {"poses": self.size, "points": len(self.names), "fps": self.fps,
-                "sources": len(self.sources), "names": list(self.names)}
+                "sources": len(self.sources), "names": list(self.names),
+                "bones with rotations": len(self.bones)}
+
+    def subset(self, keep):
+        """The poses where ``keep`` (poses,) is True, sources unchanged."""
+        return KnowledgeBase(self.poses[keep], self.names, self.fps, self.limbs, self.sources,
+                             self.source_index[keep], self.bones,
+                             None if self.turns is None else self.turns[keep])
 
     def save(self, path, overwrite=False, compact=False):
         """Write atomically to ``path`` (``.npz``); ``compact``: poses as float16 (0.5 mm steps
         at 1 m), compressed, for knowledge bases shipped with the extension."""
         write = np.savez_compressed if compact else np.savez
+        turns = {} if self.turns is None else dict(
+            bones=np.array(self.bones, dtype=str),
+            turns=self.turns.astype(np.float16 if compact else np.float32))
         with atomic_output(path, overwrite) as tmp, open(tmp, "wb") as handle:
-            write(handle, format_version=np.int64(KB_VERSION),
+            write(handle, **turns, format_version=np.int64(KB_VERSION),
                   poses=self.poses.astype(np.float16 if compact else np.float32),
                   names=np.array(self.names, dtype=str), fps=np.float64(self.fps),
                   limbs=np.asarray(self.limbs, dtype=np.int64),
@@ -125,7 +145,21 @@ def load_kb(path):
     if index.shape != (len(poses),) or index.dtype.kind != "i" or (
             index.min() < 0 or index.max() >= len(sources)):
         raise ParseError("bad source_index array", path)
-    return KnowledgeBase(poses, tuple(names), fps, limbs, tuple(sources), index)
+    bones, turns = (), None
+    if "turns" in arrays or "bones" in arrays:
+        turns = arrays.get("turns")
+        if turns is None or "bones" not in arrays:
+            raise ParseError("bone rotations need both 'bones' and 'turns'", path)
+        bones = strings(arrays, "bones", (arrays["bones"].size,), path, unique=True)
+        if turns.dtype not in (np.float32, np.float16) or turns.shape != (len(poses), len(bones), 4):
+            raise ParseError(f"turns must be float32 or float16 ({len(poses)}, {len(bones)}, 4), "
+                             f"got {turns.dtype} {turns.shape}", path)
+        turns = turns.astype(np.float32, copy=False)
+        norm = np.linalg.norm(turns, axis=2)
+        if not (np.isfinite(norm).all() and np.abs(norm - 1).max(initial=0) < 0.01):
+            raise ParseError("turns must be unit quaternions", path)
+    return KnowledgeBase(poses, tuple(names), fps, limbs, tuple(sources), index, tuple(bones),
+                         turns)
 
 
 def motion_files(sources, exclude=()):
@@ -175,7 +209,8 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
     skip_frames : int
         Leading frames dropped from every file (BVH reference poses).
     stride : int
-        Keep every ``stride``-th pose after resampling (poses at 120 fps are very redundant).
+        Keep every ``stride``-th pose after resampling (poses at 120 fps are very redundant);
+        the knowledge base's rate is ``fps / stride``.
     progress, should_cancel, report : callables, optional
         ``progress(fraction, message)``, ``should_cancel() -> bool``, ``report(message)``.
 
@@ -184,7 +219,10 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
     files = motion_files(sources, exclude)
     if not files:
         raise GapFillError("no motion files in the knowledge-base sources")
-    motions = []
+    # BVH takes also give their bones' rotations (all of them, or none: one KB, one kind);
+    # not ASF/AMC: the add-on's armature of one takes its rest pose from the take's first frame
+    rigs = all(file_suffix(path) in (".bvh", ".bvh.gz") for path in files) and not read_options
+    motions, turns = [], []
     for i, path in enumerate(files):
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
@@ -195,16 +233,39 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
         if warning and report:
             report(f"{path.name}: {warning}")
         motions.append(motion)
-    kb = kb_from_motions(motions, fps, stride, report)
+        if rigs:
+            turns.append(take_turns(path, skip_frames, motion.n_frames))
+            rigs = turns[-1] is not None
+    kb = kb_from_motions(motions, fps, stride, report, turns if rigs else None)
     if progress:
         progress(1.0, "done")
     return kb
 
 
-def kb_from_motions(motions, fps=None, stride=1, report=None):
+def take_turns(path, skip_frames, n_frames):
+    """``(bone names, quaternions (frames, bones, 4))`` of an armature take
+    (:func:`~.rig.aligned_turns`, signs continuous in time); None where the armature's frames
+    are not the motion's."""
+    from scipy.spatial.transform import Rotation
+
+    from .rig import aligned_turns, basis_matrices
+
+    rig, channels, location, _ = read_rig_take(path, skip_frames)
+    if len(channels) != n_frames:
+        return None
+    turns = aligned_turns(rig, basis_matrices(rig, channels, location))
+    quat = Rotation.from_matrix(turns.reshape(-1, 3, 3)).as_quat().reshape(turns.shape[:2] + (4,))
+    flip = np.ones(quat.shape[:2])
+    flip[1:] = np.where(np.sum(quat[1:] * quat[:-1], axis=2) < 0, -1.0, 1.0)
+    return tuple(rig.names), quat * np.cumprod(flip, axis=0)[..., None]
+
+
+def kb_from_motions(motions, fps=None, stride=1, report=None, turns=None):
     """Build a :class:`KnowledgeBase` from :class:`Motion` objects (see :func:`build_kb`).
 
     Only points present in every motion are kept; frames with any of them missing are dropped.
+    ``turns``: per motion ``(bone names, quaternions (frames, bones, 4))`` of
+    :func:`take_turns`, kept for the bones every motion has.
     """
     report = report or (lambda message: None)
     if not motions:
@@ -218,7 +279,9 @@ def kb_from_motions(motions, fps=None, stride=1, report=None):
                            "skeletons or marker sets")
     reference = find_reference(names)
     fps = float(fps or motions[0].fps)
-    poses, index = [], []
+    bones = () if turns is None else tuple(
+        b for b in turns[0][0] if all(b in t[0] for t in turns[1:]))
+    poses, index, kept_turns = [], [], []
     for i, motion in enumerate(motions):
         sub = motion.select(names)
         pos = resample(sub.positions, motion.fps, fps)[::max(1, int(stride))]
@@ -230,12 +293,20 @@ def kb_from_motions(motions, fps=None, stride=1, report=None):
         root, angle = frames_of(pos, reference)
         poses.append(normalize(pos, root, angle).astype(np.float32))
         index.append(np.full(len(pos), i, dtype=np.int32))
+        if bones:
+            own, quat = turns[i]
+            quat = resample(quat[:, [own.index(b) for b in bones]], motion.fps, fps)
+            quat = quat[::max(1, int(stride))][complete]
+            kept_turns.append((quat / np.linalg.norm(quat, axis=2, keepdims=True))
+                              .astype(np.float32))
     if not poses:
         raise GapFillError("no complete poses in the knowledge-base sources")
     limbs = motions[0].select(names).limbs
-    return KnowledgeBase(np.concatenate(poses), tuple(names), fps, limbs,
+    # consecutive poses of a source lie 1 / fps apart: a stride lowers the rate
+    return KnowledgeBase(np.concatenate(poses), tuple(names), fps / max(1, int(stride)), limbs,
                          tuple(str(m.source or f"motion {i}") for i, m in enumerate(motions)),
-                         np.concatenate(index))
+                         np.concatenate(index), bones,
+                         np.concatenate(kept_turns) if bones else None)
 
 
 def match_names(kb, names):

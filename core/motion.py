@@ -222,6 +222,27 @@ def interpolate_rows(values, valid):
     return out.reshape(values.shape)
 
 
+def blend_into_gaps(pos, pred, missing, model):
+    """Observed values kept; each gap takes the prediction plus the observation-minus-prediction
+    offset at its two ends, blended linearly (one end at clip ends)."""
+    out = pos.copy()
+    n_frames = len(pos)
+    for p, a, b in gap_runs(missing):
+        seg = pred[a:b + 1, p]
+        if np.isnan(seg).any():
+            continue
+        ends = [t for t in (a - 1, b + 1) if 0 <= t < n_frames and model[t, p]
+                and np.isfinite(pred[t, p]).all()]
+        offsets = [pos[t, p] - pred[t, p] for t in ends]
+        if len(offsets) == 2:
+            w = ((np.arange(a, b + 1) - (a - 1)) / (b + 2 - a))[:, None]
+            shift = offsets[0] * (1 - w) + offsets[1] * w
+        else:
+            shift = offsets[0] if offsets else 0.0
+        out[a:b + 1, p] = seg + shift
+    return out
+
+
 def units_for_height(height):
     """The unit (a key of :data:`UNIT_SCALES`) in which a person ``height`` tall is ~1.7 m.
 

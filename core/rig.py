@@ -184,6 +184,20 @@ def basis_matrices(rig, channels, location):
     return basis
 
 
+def aligned_turns(rig, basis):
+    """Each bone's rotation (frames, bones, 3, 3) in its parent's frame with the rest axes taken
+    out, ``R_rest basis R_rest^T``: a BVH file's own joint rotations. The same for any two rigs
+    whose rest poses point their bones the same way, whatever their bones' roll or lengths."""
+    rest = rig.rest[:, :3, :3]
+    return rest @ np.asarray(basis)[..., :3, :3] @ np.swapaxes(rest, -1, -2)
+
+
+def basis_turns(rig, turns, bones=None):
+    """The inverse of :func:`aligned_turns` for ``bones`` (default all): basis rotations."""
+    rest = rig.rest[:, :3, :3] if bones is None else rig.rest[bones, :3, :3]
+    return np.swapaxes(rest, -1, -2) @ turns @ rest
+
+
 def interpolate_channels(values, gaps):
     """Values (frames, bones, k) with the frames of each gap (``gaps`` (frames, bones) bool)
     replaced by linear interpolation of the values either side, held at clip ends: what

@@ -278,14 +278,15 @@ def test_local_models_are_shared_above_model_fps(data_dir):
     and the default 30 models a second, a quarter of the models, within 3 % of the accuracy."""
     from dataclasses import replace
 
-    from mocap_gapfill.core.recover import _model_sources, fill_knn
+    from mocap_gapfill.core.models import model_sources
+    from mocap_gapfill.core.recover import fill_knn
 
     frames = np.array([0, 1, 2, 3, 4, 7, 8, 9])
     model = np.zeros((10, 2), bool)
     model[[0, 1, 2, 3, 4, 7, 8, 9], 0] = True
     model[3:5, 1] = True  # frames 3-4 miss another point: a new stretch
-    assert _model_sources(frames, model, 120.0, 60.0).tolist() == [0, 0, 2, 3, 3, 5, 5, 7]
-    assert _model_sources(frames, model, 60.0, 60.0).tolist() == list(range(8))
+    assert model_sources(frames, model, 120.0, 60.0).tolist() == [0, 0, 2, 3, 3, 5, 5, 7]
+    assert model_sources(frames, model, 60.0, 60.0).tolist() == list(range(8))
     kb = build_kb([data_dir / "hdm05/c3d"], stride=4)
     truth = read_motion(data_dir / "cmu/c3d/85_02.c3d")
     miss = punch_gaps(truth.n_frames, truth.n_points, "markers", 0.2, np.random.default_rng(1))
@@ -322,12 +323,12 @@ def test_energy_and_gradient_match_the_terms_written_out(daz_kb, walk, monkeypat
 
     made = []
 
-    class Recorded(recover._Problem):
+    class Recorded(recover.Problem):
         def __init__(self, *args):
             super().__init__(*args)
             made.append((self, args))
 
-    monkeypatch.setattr(recover, "_Problem", Recorded)
+    monkeypatch.setattr(recover, "Problem", Recorded)
     miss = punch_gaps(walk.n_frames, walk.n_points, "joints", (3, 60), np.random.default_rng(2))
     miss[200:203] = True
     miss[-30:, walk.names.index("rHand")] = True

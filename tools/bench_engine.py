@@ -71,7 +71,7 @@ def stage_fill(repeat, k=None, device="auto", method="knn"):
     from mocap_gapfill.core.fill import fill
     from mocap_gapfill.core.io import read_motion
     from mocap_gapfill.core.kb import build_kb
-    from mocap_gapfill.core.recover import DEFAULT_K, KnnSettings
+    from mocap_gapfill.core.models import DEFAULT_K, KnnSettings
 
     t = time.perf_counter()
     kb = build_kb([DAZ], skip_frames=6, exclude=["13_30.bvh.gz"])

@@ -1,14 +1,16 @@
 """Build the starter knowledge bases shipped with the extension (sample_scenes/*_kb.npz).
 
 CMU motion only (free to redistribute; HDM05 is CC BY-SA and stays out of the product):
-- cmu_daz43_kb.npz: every Daz-friendly BVH take of ../shared/data at 20 fps (43 joints);
+- cmu_daz43_kb.npz: every Daz-friendly BVH take of ../shared/data at 20 fps (43 joints), with
+  each bone's rotation (the armature fill's ``match``);
 - cmu_markers41_kb.npz: the CMU C3D takes at 30 fps (the 41-marker set).
-Poses are stored as float16, compressed (``KnowledgeBase.save(compact=True)``).
+Poses (and rotations) are stored as float16, compressed (``KnowledgeBase.save(compact=True)``).
 
-    python tools/build_starter_kbs.py
+    python tools/build_starter_kbs.py [NAME ...]
 """
 
 import os
+import sys
 from pathlib import Path
 
 from mocap_gapfill.core.kb import STARTER_DIR, build_kb
@@ -20,8 +22,10 @@ STARTERS = {"cmu_daz43_kb.npz": dict(sources=[DATA / "cmu/bvh/daz_friendly"], fp
             "cmu_markers41_kb.npz": dict(sources=[DATA / "cmu/c3d"], fps=30.0, skip_frames=0)}
 
 
-def main():
+def main(names=()):
     for name, spec in STARTERS.items():
+        if names and name not in names:
+            continue
         kb = build_kb(spec["sources"], fps=spec["fps"], skip_frames=spec["skip_frames"],
                       report=print)
         path = kb.save(STARTER_DIR / name, overwrite=True, compact=True)
@@ -30,4 +34,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

@@ -1,0 +1,81 @@
+"""Leave-one-subject-out runs for choosing the armature fill's default (issue 14): every
+candidate of ``bonefill.CANDIDATES`` on the bones protocol's gaps and on the gaps' copies (what
+``auto`` sees), on Daz-friendly takes that are NOT test takes of docs/EVALUATION.md, the take's
+subject out of the knowledge base (which holds no test take either). Writes one npz per take
+and setting (squared joint errors per gap and per copy, per candidate) for the selection rules
+to be compared offline (docs/METHOD_NOTES.md).
+
+    python tools/tune_bones.py OUTDIR [candidate ...]
+"""
+
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from mocap_gapfill.core.bonefill import AUTO_COPIES, CANDIDATES, COPY_MARGIN, _Job, gap_copies
+from mocap_gapfill.core.evaluate import (BONE_SETTINGS, gappable_bones, kb_without,
+                                         punch_bone_gaps, subject_of)
+from mocap_gapfill.core.io import read_rig_take
+from mocap_gapfill.core.kb import build_kb, load_kb
+from mocap_gapfill.core.motion import gap_runs
+from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
+
+DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA",
+                           Path(__file__).resolve().parents[2] / "shared" / "data"))
+DAZ = DATA / "cmu/bvh/daz_friendly"
+TEST_TAKES = ["01_01", "02_02", "05_02", "06_10", "09_12", "10_01", "12_02", "13_30"]
+TUNING = ["03/03_02", "07/07_05", "08/08_02", "11/11_01"]
+
+
+def main(out, names=CANDIDATES):
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = out / "kb.npz"
+    if cache.is_file():
+        full = load_kb(cache)
+    else:
+        full = build_kb([DAZ], fps=60.0, skip_frames=6,
+                        exclude=[f"*{t}.bvh*" for t in TEST_TAKES])
+        full.save(cache)
+    for take in TUNING:
+        path = DAZ / f"{take}.bvh.gz"
+        rig, channels, location, fps = read_rig_take(path, skip_frames=6)
+        kb = kb_without(full, subject_of(path))
+        truth = rig.joints(basis_matrices(rig, channels, location))
+        for n, l in BONE_SETTINGS:
+            label = f"n={n},l={l}"
+            rng = np.random.default_rng([0, *label.encode()])
+            gaps = np.zeros(channels.shape[:2], dtype=bool)
+            punched = punch_bone_gaps(len(channels), gappable_bones(rig), (n, l), rng)
+            gaps[:, :punched.shape[1]] = punched
+            seen = interpolate_channels(channels, gaps)
+            job = _Job(rig, fps, kb, rig.roots, np.eye(4), None, lambda f, m: None, None,
+                       lambda m: None)
+            copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
+            probe = np.zeros_like(gaps)
+            for _, b, start, length in copies:
+                probe[start:start + length, b] = True
+            runs = gap_runs(gaps)
+            saved = {"owner": np.array([c[0] for c in copies], int),
+                     "copy_len": np.array([c[3] for c in copies], int),
+                     "copy_joints": np.array([job.below[c[1]].sum() for c in copies], int),
+                     "gap_len": np.array([e - a + 1 for _, a, e in runs], int),
+                     "gap_joints": np.array([job.below[b].sum() for b, _, _ in runs], int)}
+            on_copies = job.candidates(interpolate_channels(seen, probe), location,
+                                       gaps | probe, names)
+            on_gaps = job.candidates(seen, location, gaps, names)
+            for name in names:
+                saved[f"copy_{name}"] = job._errors(on_copies[name], truth, copies)
+                saved[f"gap_{name}"] = job._errors(
+                    on_gaps[name], truth, [(i, b, a, e - a + 1) for i, (b, a, e) in
+                                           enumerate(runs)])
+            np.savez(out / f"{Path(take).name}_{label}.npz", **saved)
+            print(take, label, {k: round(float(np.sqrt(v.sum() / max(1, (saved["gap_len"] * saved["gap_joints"]).sum())) * 1000), 1)
+                                for k, v in saved.items() if k.startswith("gap_") and k not in ("gap_len", "gap_joints")},
+                  flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], tuple(sys.argv[2:]) or CANDIDATES)
