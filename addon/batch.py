@@ -2,7 +2,9 @@
 
 - ``blender -b scene.blend -c mocap_gapfill --kb KB.npz [--objects A B] [--output OUT.blend]``
   (registered with ``bpy.utils.register_cli_command``);
-- ``mocap-gapfill blend SCENE.blend --kb KB.npz -o OUT.blend``: the same through the bpy module.
+- ``mocap-gapfill blend SCENE.blend --kb KB.npz -o OUT.blend``: the same through the bpy module;
+- ``blender -b -c mocap_gapfill batch INPUT... -o OUTDIR``: ``mocap-gapfill batch`` over a
+  library (files and folders of takes; see ``core/batch.py``).
 
 The input file is never overwritten unless ``--overwrite`` is given.
 """
@@ -35,7 +37,8 @@ def output_path(source, output, overwrite):
 
 
 def run(args, report=print):
-    """Detect and fill the gaps of the open file's takes and save; returns the output path."""
+    """Detect and fill the gaps of the open file's takes and save; returns what it did:
+    ``output``, ``gaps``, ``longest_gap`` (frames) and ``samples_filled``."""
     context = bpy.context
     scene = context.scene
     out = output_path(bpy.data.filepath, args.output, args.overwrite)
@@ -44,10 +47,13 @@ def run(args, report=print):
     owners = (gaps.takes_in(context, args.objects) if args.objects else gaps.all_takes(scene))
     if not owners:
         raise GapFillError("no armature or marker set in this file")
+    found = []
     for owner in owners:
         gaps.detect(owner, scene, suspects=not args.no_suspects)
         report(f"{owner.name}: {len(owner.mocap_gapfill.gaps)} gaps")
+        found += [g.last - g.first + 1 for g in owner.mocap_gapfill.gaps]
     owners = [o for o in owners if len(o.mocap_gapfill.gaps)]
+    written = 0
     if owners:
         plans, work = gaps.plan_fill(context, owners, False, args.method, args.K, args.max_gap, kb,
                                      args.device)
@@ -62,11 +68,15 @@ def run(args, report=print):
         report(f"filled {written} samples")
     bpy.ops.wm.save_as_mainfile(filepath=str(out), copy=True)
     report(f"saved {out}")
-    return out
+    return {"output": str(out), "gaps": len(found), "longest_gap": max(found, default=0),
+            "samples_filled": written}
 
 
 def cli_command(argv):
-    """``blender -b scene.blend -c mocap_gapfill ...``; returns the exit code."""
+    """``blender -b scene.blend -c mocap_gapfill ...`` (or ``... -c mocap_gapfill batch ...``:
+    the command line's batch over a library); returns the exit code."""
+    if argv and argv[0] == "batch":
+        return core_batch(argv[1:])
     parser = argparse.ArgumentParser(prog="blender -b FILE.blend -c mocap_gapfill",
                                      description=__doc__.split("\n\n")[0])
     add_arguments(parser)
@@ -75,11 +85,39 @@ def cli_command(argv):
     except SystemExit as exc:
         return exc.code or 0
     try:
-        run(args)
+        write_stats(args, run(args))
     except (GapFillError, ValueError, OSError) as exc:
         print(f"mocap_gapfill: error: {exc}")
         return 1
     return 0
+
+
+def write_stats(args, done):
+    """``--stats FILE.json``: what a run did, for ``mocap-gapfill batch``."""
+    if args.stats:
+        import json
+
+        Path(args.stats).write_text(json.dumps(done))
+
+
+def core_batch(argv):
+    """``mocap-gapfill batch`` in a plain Python process of Blender's interpreter: its worker
+    processes import the package by its own name (inside Blender it is an extension module of
+    ``bl_ext``, which only Blender can import). Returns its exit code."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    top = __name__.rsplit(".addon", 1)[0]
+    name = top if "." not in top else root.name
+    # Blender's scripts/modules hold a ``bpy`` package that only Blender can import: left out
+    path = [str(root.parent)] + [p for p in sys.path
+                                 if p and not (Path(p) / "bpy" / "__init__.py").is_file()]
+    # a .blend take of the batch opens in this Blender: ``blender -b FILE -c mocap_gapfill``
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(path),
+               MOCAP_GAPFILL_BLENDER=bpy.app.binary_path or "")
+    return subprocess.call([sys.executable, "-m", name, "batch", *argv], env=env)
 
 
 def blend_main(args, report=print):

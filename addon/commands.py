@@ -36,6 +36,8 @@ def add_arguments(parser, with_input=False):
                         help="do not treat jumping or stretching keys as gaps")
     parser.add_argument("--device", default="auto", choices=DEVICES,
                         help="where the knn search runs (torch is optional)")
+    parser.add_argument("--stats", metavar="FILE.json", help="also write what was done as JSON "
+                        "(gaps, longest gap, samples filled; for mocap-gapfill batch)")
 
 
 def cmd_demo(args):
@@ -56,7 +58,7 @@ def cmd_demo(args):
 def cmd_blend(args):
     from . import batch
 
-    batch.blend_main(args)
+    batch.write_stats(args, batch.blend_main(args))
     return 0
 
 

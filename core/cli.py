@@ -11,8 +11,6 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from .errors import GapFillError
 from .backend import DEVICES
 from .fill import BASELINES, DEFAULT_METHOD, METHODS
@@ -164,13 +162,9 @@ def cmd_fill(args):
         _report(f"no -k given: the starter knowledge base {path.name} ({kb.size} poses of CMU "
                 "motion)")
     progress = Progress(args.quiet)
-    kept = _long_gaps(motion, args.max_gap) if args.max_gap else None
     out = fill(motion, args.method, kb=kb, settings=KnnSettings(k=args.k, device=args.device),
-               progress=progress, report=_report)
+               progress=progress, report=_report, max_gap=args.max_gap)
     progress.done()
-    if kept is not None:
-        out = out.replace(positions=np.where(kept[..., None], np.nan, out.positions),
-                          filled=out.filled & ~kept if out.filled is not None else None)
     write_motion(out, dst, overwrite=args.force)
     n_filled = int((motion.missing & ~out.missing).sum())
     left = int(out.missing.sum())
@@ -179,13 +173,30 @@ def cmd_fill(args):
     return 0
 
 
-def _long_gaps(motion, max_gap):
-    """Mask of the samples in gaps longer than ``max_gap`` frames (left unfilled)."""
-    kept = np.zeros(motion.missing.shape, dtype=bool)
-    for p, a, b in motion.gap_runs():
-        if b - a + 1 > max_gap:
-            kept[a:b + 1, p] = True
-    return kept
+def cmd_batch(args):
+    from .batch import Options, ProgressLine, run_batch, summary
+
+    if args.kb and not Path(args.kb).is_file():
+        raise GapFillError(f"no such knowledge-base file: {args.kb}")
+    options = Options(kb=str(Path(args.kb).resolve()) if args.kb else None, method=args.method,
+                      max_gap=args.max_gap or 0, k=args.k, device=args.device)
+    progress = ProgressLine(args.quiet)
+    rows = []
+    try:
+        rows = run_batch(args.inputs, args.output, options, engine=args.engine, jobs=args.jobs,
+                         address=args.address, fmt=args.format, progress=progress)
+    except KeyboardInterrupt:
+        progress.done()
+        print(f"interrupted: finished takes are kept and skipped by the next run; report in "
+              f"{args.output}", file=sys.stderr)
+        return 130
+    progress.done()
+    for row in rows:
+        if row["status"] == "failed":
+            where = "" if row["error"].startswith(row["input"]) else f"{row['input']}: "
+            print(f"failed: {where}{row['error']}", file=sys.stderr)
+    print(f"{summary(rows, len(rows))}; report: {Path(args.output) / 'report.csv'}")
+    return 1 if any(row["status"] == "failed" for row in rows) else 0
 
 
 def cmd_evaluate(args):
@@ -305,6 +316,32 @@ def build_parser(extra=None):
     p.add_argument("--quiet", action="store_true", help="no progress line")
     _add_read_options(p)
     p.set_defaults(func=cmd_fill)
+
+    p = sub.add_parser("batch", help="fill a library of takes (files or folders) into a folder, "
+                                     "on this machine or a Ray / Dask cluster; resumable")
+    p.add_argument("inputs", nargs="+", metavar="INPUT",
+                   help="C3D, BVH, ASF/AMC and .blend files, or folders of them (recursive)")
+    p.add_argument("-k", "--kb", help="knowledge base (.npz), loaded once per worker (default: "
+                                      "the starter one that fits each take)")
+    p.add_argument("-o", "--output", required=True, metavar="OUTDIR",
+                   help="where the filled takes go, mirroring the input tree")
+    p.add_argument("--jobs", type=int, help="worker processes (default: the core count)")
+    p.add_argument("--engine", default="local", choices=["local", "ray", "dask"],
+                   help="local: a process pool (default); ray / dask: a cluster at --address "
+                        "or a local one of --jobs workers (pip install mocap-gapfill[ray] or "
+                        "[dask])")
+    p.add_argument("--address", help="ray: 'auto' or ray://host:port; dask: the scheduler "
+                                     "(tcp://host:8786)")
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS)
+    p.add_argument("--max-gap", type=int, metavar="FRAMES",
+                   help="leave gaps longer than this unfilled")
+    p.add_argument("--format", default="same", choices=["same", "c3d", "npz", "csv"],
+                   help="output format (same: C3D stays C3D, BVH and ASF/AMC become .npz; "
+                        ".blend files stay .blend)")
+    p.add_argument("-K", dest="k", type=int, help="neighbours per frame (knn)")
+    p.add_argument("--device", default="auto", choices=DEVICES)
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(func=cmd_batch)
 
     p = sub.add_parser("evaluate", help="accuracy of the methods on punched gaps in real data")
     p.add_argument("--protocol", required=True,

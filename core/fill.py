@@ -24,7 +24,7 @@ AUTO_RIGID_FIRST = 0.005
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
-         report=None):
+         report=None, max_gap=None):
     """Fill the gaps of a motion with the named method.
 
     Parameters
@@ -36,6 +36,9 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
         Needed by ``knn`` and ``pca``.
     settings : KnnSettings, optional
         ``knn`` settings (K, weights, ...).
+
+    max_gap : int, optional
+        Gaps longer than this many frames are left unfilled.
 
     Returns
     -------
@@ -49,6 +52,17 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
                            "one, 'rigid' fills markers from their rigid partners")
     if not motion.missing.any():
         return motion
+    out = _fill(motion, method, kb, settings, progress, should_cancel, report)
+    if max_gap:
+        kept = np.zeros(motion.missing.shape, dtype=bool)
+        for p, a, b in motion.gap_runs():
+            kept[a:b + 1, p] = b - a + 1 > max_gap
+        out = out.replace(positions=np.where(kept[..., None], np.nan, out.positions),
+                          filled=out.filled & ~kept if out.filled is not None else None)
+    return out
+
+
+def _fill(motion, method, kb, settings, progress, should_cancel, report):
     if method == "knn":
         from .recover import KnnSettings, fill_knn  # scipy.optimize only when needed
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set up everything on a fresh machine: a virtual environment per Blender API line, the package
 # in editable mode (mocap-gapfill command), and the wheels the extension bundles (./wheels):
-#   .venv    Python 3.11, bpy 5.0, torch 2.13.0 CPU (the whole suite, the command line)
+#   .venv    Python 3.11, bpy 5.0, torch 2.13.0 CPU, ray, dask (the whole suite, the command line)
 #   .venv42  Python 3.11, bpy 4.2 LTS (add-on tests)
 #   .venv52  Python 3.13, bpy 5.2  (add-on tests; Blender 5.1+ runs Python 3.13)
 # Safe to run again.
@@ -28,7 +28,9 @@ make_venv() {
 
 # bpy 4.2-5.0 are built against numpy 1.x
 # torch is optional for users; pinned here (2.13.0 is the CPU build these machines keep)
-make_venv .venv "$PY" "numpy<2" "scipy==1.16.3" "bpy==5.0.1" "torch==2.13.0"
+# ray and dask: the batch command's cluster engines (optional extras for users)
+make_venv .venv "$PY" "numpy<2" "scipy==1.16.3" "bpy==5.0.1" "torch==2.13.0" "ray==2.60.0" \
+  "dask[distributed]==2026.8.0"
 if [ "${MOCAP_GAPFILL_SKIP_BPY42:-0}" != 1 ]; then
   make_venv .venv42 "$PY" "numpy<2" "scipy==1.16.3" "bpy==4.2.23"
 fi

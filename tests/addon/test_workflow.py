@@ -9,6 +9,7 @@ with the truth in millimetres.
 
 import gzip
 import hashlib
+import shutil
 import subprocess
 import sys
 
@@ -368,6 +369,15 @@ def test_batch_command_writes_a_new_filled_file(daz_armature, daz_kb, tmp_path):
     out = tmp_path / "take_filled.blend"
     assert out.is_file() and _sha(source) == before
     assert batch.cli_command(["--kb", str(daz_kb)]) == 1  # the output exists: not replaced
+
+    # blender -c mocap_gapfill batch: the command line's batch over a folder holding the scene
+    library = tmp_path / "library"
+    library.mkdir()
+    shutil.copy(source, library / "take.blend")
+    assert batch.cli_command(["batch", str(library), "-o", str(tmp_path / "cleaned"), "--kb",
+                              str(daz_kb), "--jobs", "1", "--quiet"]) == 0
+    assert (tmp_path / "cleaned" / "take.blend").is_file() and _sha(source) == before
+    assert "1 filled, 0 up to date, 0 failed" in (tmp_path / "cleaned" / "report.json").read_text()
 
     # the same through the command line and the bpy module, in a fresh process
     out2 = tmp_path / "via_cli.blend"
