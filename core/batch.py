@@ -28,6 +28,7 @@ import json
 import os
 import sys
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -224,9 +225,11 @@ def _engine_local(tasks, jobs, address, done):
                         retry.append(task)
                     else:
                         done(_failed(task, "the worker process died twice on this take"))
-        finally:
+        except BaseException:  # Ctrl-C: no task outlives the batch
             for process in list(getattr(pool, "_processes", {}).values()):
-                process.kill()  # at once, also on Ctrl-C: no task outlives the batch
+                process.kill()
+            raise
+        finally:
             pool.shutdown(wait=True, cancel_futures=True)
         todo = retry
 
@@ -336,9 +339,9 @@ def run_batch(inputs, outdir, options, engine="local", jobs=None, address=None, 
         show(len(rows), total, sum(r["status"] == "failed" for r in rows), left)
 
     if tasks:
-        _threads_per_job(jobs)
         try:
-            ENGINE_RUNNERS[engine](tasks, jobs, address, done)
+            with _threads_per_job(jobs):
+                ENGINE_RUNNERS[engine](tasks, jobs, address, done)
         finally:
             _remove_partial(outdir)
             write_report(outdir, rows, total)
@@ -353,11 +356,22 @@ def _remove_partial(outdir):
         stale.unlink(missing_ok=True)
 
 
+@contextmanager
 def _threads_per_job(jobs):
-    """Workers share the cores: each gets its part of them for BLAS / OpenMP (unless set)."""
-    threads = str(max(1, (os.cpu_count() or 1) // jobs))
-    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(name, threads)
+    """While workers start, BLAS / OpenMP threads per worker (they inherit the environment):
+    ``OMP_NUM_THREADS`` where set, else each worker its share of the cores."""
+    threads = os.environ.get("OMP_NUM_THREADS") or str(max(1, (os.cpu_count() or 1) // jobs))
+    names = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+    before = {name: os.environ.get(name) for name in names}
+    os.environ.update({name: threads for name in names})
+    try:
+        yield
+    finally:
+        for name, value in before.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def _read_manifest(path):

@@ -58,6 +58,8 @@ def table(path):
     default = payload.get("default_method", "knn")
     ours = [m for m in methods if m not in baselines]
     second = "angle_deg" if "angle_deg" in rows[0] else "rmse_all_mm"
+    # armature gaps: also against doing nothing (Blender's interpolation), gap by gap
+    bones = payload["protocol"] == "bones" and "interp" in methods
     out = [f"### {Path(path).stem}: protocol `{payload['protocol']}`, {payload.get('fps')} fps, "
            f"seed {payload.get('seed')}",
            f"Test takes ({len(tests)}): {', '.join(tests)}. Knowledge base: "
@@ -66,8 +68,10 @@ def table(path):
            f"{', '.join(baselines)}.", "",
            "| setting | " + " | ".join(methods) + " | "
            + " | ".join(f"{m} / best baseline" for m in ours)
-           + f" | {default} / best baseline per take (min-max) |",
-           "|---|" + "---:|" * (len(methods) + len(ours) + 1)]
+           + f" | {default} / best baseline per take (min-max) |"
+           + (f" {default} / interp (min-max over takes) | gaps where {default} > 1.1 interp "
+              "+ 2 mm |" if bones else ""),
+           "|---|" + "---:|" * (len(methods) + len(ours) + 1 + 2 * bones)]
     for s in settings:
         cells, means = [], {}
         for m in methods:
@@ -79,9 +83,19 @@ def table(path):
         got = {(r["method"], r["test"]): r["rmse_missing_mm"] for r in rows if r["setting"] == s}
         per_take = [got[(default, t)] / min(got[(m, t)] for m in baselines) for t in tests
                     if (default, t) in got]
-        out.append(f"| {s} | " + " | ".join(bold) + " | "
-                   + " | ".join(f"{means[m] / best:.2f}" for m in ours)
-                   + f" | {min(per_take):.2f}-{max(per_take):.2f} |")
+        line = (f"| {s} | " + " | ".join(bold) + " | "
+                + " | ".join(f"{means[m] / best:.2f}" for m in ours)
+                + f" | {min(per_take):.2f}-{max(per_take):.2f} |")
+        if bones:
+            ratio = [got[(default, t)] / got[("interp", t)] for t in tests]
+            gaps = {(r["method"], r["test"]): np.array(r["gaps_mm"]) for r in rows
+                    if r["setting"] == s}
+            worse = sum(int((gaps[(default, t)] > 1.1 * gaps[("interp", t)] + 2).sum())
+                        for t in tests)
+            count = sum(len(gaps[("interp", t)]) for t in tests)
+            line += (f" {means[default] / means['interp']:.2f} ({min(ratio):.2f}-"
+                     f"{max(ratio):.2f}) | {worse} / {count} |")
+        out.append(line)
     seconds = {m: np.mean([r["seconds"] for r in rows if r["method"] == m]) for m in methods}
     out += ["", "Mean seconds per fill: " + ", ".join(f"{m} {v:.2f}" for m, v in seconds.items()),
             ""]
