@@ -151,7 +151,8 @@ def load_kb(path):
         if turns is None or "bones" not in arrays:
             raise ParseError("bone rotations need both 'bones' and 'turns'", path)
         bones = strings(arrays, "bones", (arrays["bones"].size,), path, unique=True)
-        if turns.dtype not in (np.float32, np.float16) or turns.shape != (len(poses), len(bones), 4):
+        if (turns.dtype not in (np.float32, np.float16)
+                or turns.shape != (len(poses), len(bones), 4)):
             raise ParseError(f"turns must be float32 or float16 ({len(poses)}, {len(bones)}, 4), "
                              f"got {turns.dtype} {turns.shape}", path)
         turns = turns.astype(np.float32, copy=False)
