@@ -1,7 +1,7 @@
 """Build the starter knowledge bases shipped with the extension (sample_scenes/*_kb.npz).
 
 CMU motion only (free to redistribute; HDM05 is CC BY-SA and stays out of the product):
-- cmu_daz43_kb.npz: every Daz-friendly BVH take of ../shared/data at 20 fps (43 joints), with
+- cmu_daz43_kb.npz: every Daz-friendly BVH take of ../shared/data at 15 fps (43 joints), with
   each bone's rotation (the armature fill's ``match``);
 - cmu_markers41_kb.npz: the CMU C3D takes at 30 fps (the 41-marker set).
 Poses (and rotations) are stored as float16, compressed (``KnowledgeBase.save(compact=True)``).
@@ -17,7 +17,7 @@ from mocap_gapfill.core.kb import STARTER_DIR, build_kb
 
 DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))
-STARTERS = {"cmu_daz43_kb.npz": dict(sources=[DATA / "cmu/bvh/daz_friendly"], fps=20.0,
+STARTERS = {"cmu_daz43_kb.npz": dict(sources=[DATA / "cmu/bvh/daz_friendly"], fps=15.0,
                                      skip_frames=6),
             "cmu_markers41_kb.npz": dict(sources=[DATA / "cmu/c3d"], fps=30.0, skip_frames=0)}
 
