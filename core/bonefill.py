@@ -160,6 +160,7 @@ class _Job:
         self.settings = settings
         self.progress, self.should_cancel, self.report = progress, should_cancel, report
         self.below = rig.placed_by()
+        self._kb_features = None  # the knowledge base's rotations as match's features
         # a moving bone places its own head (heads rigs; a tails rig's root joint is its head)
         self.own = moves & (rig.roots if rig.lengths is not None else True)
 
@@ -264,9 +265,11 @@ class _Job:
             return out
         turns = aligned_turns(rig, basis)[:, bones]
         features = turns[..., :2].reshape(len(turns), len(bones), 6)
-        kb_turns = kb.turns[:, [kb.bones.index(rig.names[b]) for b in bones]]
-        kb_features = Rotation.from_quat(kb_turns.reshape(-1, 4)).as_matrix()[..., :2] \
-            .reshape(len(kb_turns), len(bones), 6).astype(np.float32)
+        if self._kb_features is None:  # once per fill: auto matches the copies, then the gaps
+            kb_turns = kb.turns[:, [kb.bones.index(rig.names[b]) for b in bones]]
+            self._kb_features = Rotation.from_quat(kb_turns.reshape(-1, 4)).as_matrix()[
+                ..., :2].reshape(len(kb_turns), len(bones), 6).astype(np.float32)
+        kb_features = self._kb_features
         margin = int(round(MATCH_CONTEXT * self.fps))
         frames = len(gaps)
         busy = [(a, e) for _, a, e in gap_runs(gap.any(axis=1)[:, None])]
