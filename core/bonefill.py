@@ -502,13 +502,12 @@ def _damped(shape, pred, seen, known, a, e):
 def _resampled_runs(values, keep, step):
     """``values`` (frames, ...) sampled every ``step`` frames (linear) along each run of
     ``keep``, and the run each sample belongs to."""
+    from .matching import at_times
+
     out, source = [], []
     for i, (_, a, e) in enumerate(gap_runs(keep[:, None])):
         times = a + step * np.arange(int((e - a) / step) + 1)
-        i0 = np.floor(times).astype(int)
-        i1 = np.minimum(i0 + 1, e)
-        part = (times - i0).reshape((-1,) + (1,) * (values.ndim - 1))
-        out.append(values[i0] * (1 - part) + values[i1] * part)
+        out.append(at_times(values, times, e))
         source.append(np.full(len(times), i))
     if not out:
         return np.zeros((0,) + values.shape[1:]), np.zeros(0, int)

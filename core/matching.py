@@ -60,24 +60,33 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
         frames = np.arange(lo, hi + 1)
         mean = np.zeros((len(frames),) + kb_features.shape[1:])
         for _, speed, t, width in chosen:
-            k = (frames - lo) * kb_fps / (speed * fps)
-            i0 = np.minimum(np.floor(k).astype(int), width - 1)
-            i1 = np.minimum(i0 + 1, width - 1)
-            part = (k - i0)[:, None, None]
-            mean += kb_features[t + i0] * (1 - part) + kb_features[t + i1] * part
+            mean += at_times(kb_features[t:t + width], (frames - lo) * kb_fps / (speed * fps),
+                             width - 1)
         out.append(mean / len(chosen))
     return out
+
+
+def brackets(times, last):
+    """The frames either side of fractional frame ``times`` (none past ``last``) and the share
+    of the later one."""
+    i0 = np.minimum(np.floor(times).astype(int), last)
+    return i0, np.minimum(i0 + 1, last), times - i0
+
+
+def at_times(values, times, last):
+    """``values`` (frames, ...) at fractional frame ``times``, linearly (frames past ``last``
+    held at it)."""
+    i0, i1, part = brackets(times, last)
+    part = part.reshape((-1,) + (1,) * (values.ndim - 1))
+    return values[i0] * (1 - part) + values[i1] * part
 
 
 def _sample(features, weight, times):
     """Features at fractional frame ``times`` (linear), and their weights (the smaller of the
     two frames')."""
-    i0 = np.floor(times).astype(int)
-    i1 = np.minimum(i0 + 1, len(features) - 1)
-    part = (times - i0)[:, None, None]
-    w = np.minimum(weight[i0], weight[i1])
-    q = np.nan_to_num(features[i0]) * (1 - part) + np.nan_to_num(features[i1]) * part
-    return q, w
+    i0, i1, _ = brackets(times, len(features) - 1)
+    return (at_times(np.nan_to_num(features), times, len(features) - 1),
+            np.minimum(weight[i0], weight[i1]))
 
 
 def _window_costs(q, w, flat, sq):
