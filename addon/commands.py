@@ -52,6 +52,7 @@ def cmd_demo(args):
               "(bash tools/setup.sh installs it)")
         return 0
     demo_scenes(args.outdir, demo)
+    real_scenes(args.outdir)
     return 0
 
 
@@ -95,12 +96,68 @@ def demo_scenes(outdir, demo, report=print):
         unregister_addon()
 
 
+def real_scenes(outdir, report=print):
+    """Blender scenes of the real sample takes (:mod:`.samples`), each saved as found
+    (``cmu_*.blend``) and after "Fill All Gaps" with the starter knowledge base without the
+    take's subject (``cmu_*_filled.blend``). Returns ``{bone: (fill_mm, interp_mm)}`` for the
+    armature's gaps, measured on Blender's own evaluation against the take before its keys were
+    deleted."""
+    import bpy
+
+    from . import bridge, register as register_addon, samples, unregister as unregister_addon
+
+    outdir = Path(outdir).resolve()
+    scores = {}
+    register_addon()
+    try:
+        for kind, take in samples.SAMPLES.items():
+            if kind == "MARKERS" and not _has_ezc3d():
+                report(f"ezc3d is not installed: the scene of {take} is skipped")
+                continue
+            stem = f"cmu_{take.split('.')[0]}_{kind.lower()}"
+            bpy.ops.wm.read_homefile(use_empty=True)
+            scene = bpy.context.scene
+            scene.mocap_gapfill.detect_suspects = False
+            owner, truth = samples.load(bpy.context, kind)
+            bpy.ops.wm.save_as_mainfile(filepath=str(outdir / f"{stem}.blend"), compress=True)
+            before = bridge.read_take(owner, scene)
+            bpy.ops.mocap_gapfill.fill_gaps(objects=owner.name)
+            bpy.ops.wm.save_as_mainfile(filepath=str(outdir / f"{stem}_filled.blend"),
+                                        compress=True)
+            after = bridge.read_take(owner, scene)
+            report(f"Blender scene of {take} (CMU), {len(owner.mocap_gapfill.gaps)} gaps -> "
+                   f"{outdir / stem}.blend; filled with "
+                   f"{Path(scene.mocap_gapfill.kb_path).name} -> {outdir / stem}_filled.blend")
+            if kind == "MARKERS":
+                was, left = (np.isnan(t.positions[..., 0]) for t in (before, after))
+                report(f"  {int(was.sum())} marker samples missing, {int((was & ~left).sum())} "
+                       "filled (the rest: points the knowledge base and the take's other "
+                       "markers cannot place)")
+                continue
+            scores = samples.bone_gap_scores(truth, before, after)
+            report("  joints below each gapped bone, RMSE on Blender's evaluation: " + ", ".join(
+                f"{bone} {fill:.1f} mm (Blender's interpolation {interp:.1f})"
+                for bone, (fill, interp) in scores.items()))
+        return scores
+    finally:
+        unregister_addon()
+
+
+def _has_ezc3d():
+    try:
+        import ezc3d  # noqa: F401
+    except ImportError:  # e.g. a distribution's Blender without the bundled wheels
+        return False
+    return True
+
+
 def build_demo_scene(context, demo):
     """The demo's armature (keys removed from three bones) and marker set (six markers with
     gaps) in the current scene, gaps detected; returns ``(armature, marker_set)``."""
     import bpy
 
     from . import bridge, compat
+    from .samples import remove_keys
 
     arm = bridge.import_armature(context, demo["skeleton"], "Walker")
     remove_keys(arm, [(name, a + 1, b + 1) for name, a, b in BONE_GAPS])
@@ -113,28 +170,6 @@ def build_demo_scene(context, demo):
         bpy.ops.mocap_gapfill.detect_gaps()
     context.scene.mocap_gapfill.kb_path = str(demo["kb_skeleton"])
     return arm, root
-
-
-def remove_keys(obj, gaps):
-    """Delete the keys of bones over frame ranges: ``[(bone, first, last), ...]``."""
-    from . import bridge, compat
-
-    curves = compat.fcurves(obj)
-    for bone, first, last in gaps:
-        tag = f'pose.bones["{bone}"]'
-        for curve in curves:
-            if curve.data_path.startswith(tag):
-                frames, values = bridge.curve_keys(curve)
-                keep = (frames < first) | (frames > last)
-                modes = np.empty(len(frames), dtype=np.int32)
-                curve.keyframe_points.foreach_get("interpolation", modes)
-                curve.keyframe_points.clear()
-                curve.keyframe_points.add(int(keep.sum()))
-                co = np.empty(2 * int(keep.sum()), dtype=np.float32)
-                co[0::2], co[1::2] = frames[keep], values[keep]
-                curve.keyframe_points.foreach_set("co", co)
-                curve.keyframe_points.foreach_set("interpolation", modes[keep])
-                curve.update()
 
 
 def take_rmse(owner, truth, scene):

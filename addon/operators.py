@@ -107,6 +107,33 @@ class MOCAP_GAPFILL_OT_import_markers(bpy.types.Operator, ImportHelper):
         return {"FINISHED"}
 
 
+class MOCAP_GAPFILL_OT_open_sample(bpy.types.Operator):
+    """Import a real CMU take shipped with the extension, with gaps to fill, and choose the
+    starter knowledge base without the take's subject (as for a take it has never seen)"""
+
+    bl_idname = "mocap_gapfill.open_sample"
+    bl_label = "Open Sample Take"
+    bl_options = {"REGISTER", "UNDO"}
+
+    kind: EnumProperty(name="Sample", default="MARKERS", items=(
+        ("MARKERS", "Markers", "CMU 01_01 (C3D, 41 markers, 120 fps) with the gaps the capture "
+                               "really has"),
+        ("ARMATURE", "Armature", "CMU 03_02 (Daz-friendly BVH, 120 fps) through Blender's BVH "
+                                 "importer, the keys of lForeArm, rShin and chest deleted")))
+
+    def execute(self, context):
+        from . import samples
+
+        try:
+            owner, _ = samples.load(context, self.kind)
+        except GapFillError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"{owner.name}: {len(owner.mocap_gapfill.gaps)} gaps; knowledge "
+                              f"base {Path(context.scene.mocap_gapfill.kb_path).name}")
+        return {"FINISHED"}
+
+
 class MOCAP_GAPFILL_OT_import_skeleton(bpy.types.Operator, ImportHelper):
     """Import an ASF/AMC (or BVH) skeleton as an armature whose bones follow the joints"""
 
@@ -408,7 +435,7 @@ class MOCAP_GAPFILL_OT_use_recent_kb(bpy.types.Operator):
 
 
 classes = (MOCAP_GAPFILL_OT_file_info, MOCAP_GAPFILL_OT_import_markers,
-           MOCAP_GAPFILL_OT_import_skeleton, MOCAP_GAPFILL_OT_detect_gaps,
+           MOCAP_GAPFILL_OT_open_sample, MOCAP_GAPFILL_OT_import_skeleton, MOCAP_GAPFILL_OT_detect_gaps,
            MOCAP_GAPFILL_OT_mark_gap, MOCAP_GAPFILL_OT_remove_gap, MOCAP_GAPFILL_OT_fill_gaps,
            MOCAP_GAPFILL_OT_ghost, MOCAP_GAPFILL_OT_load_kb, MOCAP_GAPFILL_OT_build_kb,
            MOCAP_GAPFILL_OT_use_recent_kb)

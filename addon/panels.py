@@ -53,6 +53,12 @@ class MOCAP_GAPFILL_PT_main(_Panel, bpy.types.Panel):
         row.operator("mocap_gapfill.import_markers", text="C3D", icon="EMPTY_DATA")
         row.operator("mocap_gapfill.import_skeleton", text="ASF/AMC", icon="ARMATURE_DATA")
         row.operator("mocap_gapfill.file_info", text="", icon="INFO")
+        row = layout.row(align=True)
+        row.label(text="Sample:")
+        row.operator("mocap_gapfill.open_sample", text="Markers", icon="EMPTY_DATA").kind = \
+            "MARKERS"
+        row.operator("mocap_gapfill.open_sample", text="Armature",
+                     icon="ARMATURE_DATA").kind = "ARMATURE"
         info = context.window_manager.mocap_gapfill.last_info
         if info:
             layout.label(text=info)

@@ -69,7 +69,7 @@ def _blend_take(bvh, path):
         import bpy
     except ImportError:
         return None
-    from mocap_gapfill.addon.commands import remove_keys
+    from mocap_gapfill.addon.samples import remove_keys
 
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.import_anim.bvh(filepath=str(bvh), frame_start=1)

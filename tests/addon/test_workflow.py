@@ -30,7 +30,7 @@ def modules():
     return (import_module(f"{root.__name__}.addon.bridge"),
             import_module(f"{root.__name__}.addon.compat"),
             import_module(f"{root.__name__}.addon.gaps"),
-            import_module(f"{root.__name__}.addon.commands"))
+            import_module(f"{root.__name__}.addon.samples"))
 
 
 def rmse_mm(a, b):
@@ -156,6 +156,33 @@ def test_clicking_a_gap_selects_and_jumps(scene, data_dir):
     assert scene.frame_current == longest.first
 
 
+def test_sample_takes_open_with_their_gaps_and_a_kb_without_their_subject(scene):
+    """The panel's Sample buttons: CMU 01_01 as empties with its real gaps, CMU 03_02 through
+    Blender's BVH importer with three bones' keys deleted; each gets the starter knowledge base
+    without the take's subject, written into the extension's user folder."""
+    from mocap_gapfill.core.kb import load_kb
+
+    bpy = pytest.importorskip("bpy")
+    assert bpy.ops.mocap_gapfill.open_sample(kind="ARMATURE") == {"FINISHED"}
+    arm = bpy.context.active_object
+    assert arm.type == "ARMATURE" and scene.render.fps == 120
+    found = sorted((g.point, g.first, g.last) for g in arm.mocap_gapfill.gaps)
+    assert found == [("chest", 301, 360), ("lForeArm", 121, 220), ("rShin", 151, 240)]
+    kb_file = scene.mocap_gapfill.kb_path
+    assert "extensions" in kb_file and kb_file.endswith("cmu_daz43_kb_without_03.npz")
+    kb = load_kb(kb_file)
+    used = [kb.sources[i] for i in np.unique(kb.source_index)]
+    assert kb.turns is not None and used and not any("03_0" in s for s in used)
+    assert bpy.ops.mocap_gapfill.open_sample(kind="MARKERS") == {"FINISHED"}
+    root = bpy.context.active_object
+    assert root.type == "EMPTY" and len(root.children) == 42
+    assert sorted((g.point, g.last - g.first + 1) for g in root.mocap_gapfill.gaps)[-1] == \
+        ("RBAC-1", 2623)
+    assert scene.mocap_gapfill.kb_path.endswith("cmu_markers41_kb_without_01.npz")
+    # the armature is still there, untouched by the second sample
+    assert len(arm.mocap_gapfill.gaps) == 3
+
+
 @pytest.fixture
 def daz_armature(scene, data_dir, tmp_path):
     bpy = pytest.importorskip("bpy")
@@ -171,8 +198,8 @@ BONE_GAPS = (("lForeArm", 120, 219), ("rShin", 150, 239), ("chest", 300, 359))
 
 
 def remove_bone_keys(obj, bone_gaps):
-    _, _, _, commands = modules()
-    commands.remove_keys(obj, bone_gaps)
+    _, _, _, samples = modules()
+    samples.remove_keys(obj, bone_gaps)
 
 
 def test_bvh_armature_fill_beats_blender_interpolation(daz_armature, daz_kb, data_dir):
