@@ -263,10 +263,9 @@ def _engine_ray(tasks, jobs, address, done):
 
 
 def _engine_dask(tasks, jobs, address, done):
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, as_completed
 
-    cluster = None if address else LocalCluster(n_workers=jobs, threads_per_worker=1,
-                                                processes=True, dashboard_address=None)
+    cluster = None if address else dask_local_cluster(jobs)
     client = Client(address or cluster)
     try:
         futures = {client.submit(run_take, task, pure=False, retries=2): task for task in tasks}
@@ -279,6 +278,19 @@ def _engine_dask(tasks, jobs, address, done):
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def dask_local_cluster(jobs):
+    """A Dask LocalCluster of ``jobs`` single-threaded worker processes. Dask's nannies set
+    MALLOC_TRIM_THRESHOLD_=65536 in their workers, which turns off glibc's adaptive mmap
+    threshold: every large numpy temporary is then mapped and unmapped afresh (a fill ran ~20 %
+    slower, docs/BENCHMARKS.md); here it is left to glibc."""
+    import dask
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+        return LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                            dashboard_address=None)
 
 
 ENGINE_RUNNERS = {"local": _engine_local, "ray": _engine_ray, "dask": _engine_dask}

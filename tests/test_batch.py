@@ -229,3 +229,26 @@ def test_cluster_engines_write_what_the_local_one_does(engine, library, tmp_path
         mine = tmp_path / "local" / Path(row["output"]).relative_to(tmp_path / engine)
         assert np.array_equal(read_motion(row["output"]).positions, read_motion(mine).positions,
                               equal_nan=True)
+
+
+def test_dask_workers_keep_glibcs_adaptive_malloc():
+    """Dask's nannies give workers MALLOC_TRIM_THRESHOLD_=65536, which made fills ~20 % slower
+    (docs/BENCHMARKS.md); the local cluster of ``--engine dask`` starts them without it and with
+    one BLAS thread each, and leaves Dask's configuration as it was."""
+    if os.environ.get("MOCAP_GAPFILL_REQUIRE_CLUSTER") != "1":
+        pytest.importorskip("distributed")
+    import dask
+    from distributed import Client
+
+    from mocap_gapfill.core.batch import dask_local_cluster
+
+    cluster = dask_local_cluster(2)
+    try:
+        with Client(cluster) as client:
+            seen = client.run(lambda: (os.environ.get("MALLOC_TRIM_THRESHOLD_"),
+                                       os.environ.get("OPENBLAS_NUM_THREADS")))
+    finally:
+        cluster.close()
+    assert len(seen) == 2 and all(trim is None for trim, _ in seen.values()), seen
+    assert all(blas == "1" for _, blas in seen.values()), seen
+    assert dask.config.get("distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_") == 65536
