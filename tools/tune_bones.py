@@ -3,9 +3,15 @@ candidate of ``bonefill.CANDIDATES`` on the bones protocol's gaps and on the gap
 ``auto`` sees), on Daz-friendly takes that are NOT test takes of docs/EVALUATION.md, the take's
 subject out of the knowledge base (which holds no test take either). Writes one npz per take
 and setting (squared joint errors per gap and per copy, per candidate) for the selection rules
-to be compared offline (docs/METHOD_NOTES.md).
+to be compared offline (docs/METHOD_NOTES.md). Where ``match`` and ``hermite`` are among the
+candidates, blends of ``interp`` and ``hermite`` towards ``match`` are saved too
+(``interp_m0.25`` ... ``hermite_m1.0``: that share of the way to ``match``).
 
     python tools/tune_bones.py OUTDIR [candidate ...]
+    MOCAP_GAPFILL_TUNE_TAKES=01_08,02_05,... python tools/tune_bones.py OUTDIR [candidate ...]
+
+(session 9: 01_08, 02_05, 03_02, 05_10, 06_03, 07_05, 08_02, 09_05, 10_03, 11_01, 12_03, 13_10
+with the candidates interp hermite match.)
 """
 
 import os
@@ -14,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocap_gapfill.core.bonefill import AUTO_COPIES, CANDIDATES, COPY_MARGIN, _Job, gap_copies
+from mocap_gapfill.core.bonefill import AUTO_COPIES, CANDIDATES, COPY_MARGIN, _Job, gap_copies, \
+    halfway
 from mocap_gapfill.core.evaluate import (BONE_SETTINGS, gappable_bones, kb_without,
                                          punch_bone_gaps, subject_of)
 from mocap_gapfill.core.io import read_rig_take
@@ -27,6 +34,7 @@ DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA",
 DAZ = DATA / "cmu/bvh/daz_friendly"
 TEST_TAKES = ["01_01", "02_02", "05_02", "06_10", "09_12", "10_01", "12_02", "13_30"]
 TUNING = ["03/03_02", "07/07_05", "08/08_02", "11/11_01"]
+SHARES = (0.25, 0.5, 0.75, 1.0)
 
 
 def main(out, names=CANDIDATES):
@@ -39,7 +47,9 @@ def main(out, names=CANDIDATES):
         full = build_kb([DAZ], fps=60.0, skip_frames=6,
                         exclude=[f"*{t}.bvh*" for t in TEST_TAKES])
         full.save(cache)
-    for take in TUNING:
+    takes = os.environ.get("MOCAP_GAPFILL_TUNE_TAKES")
+    takes = [f"{t[:2]}/{t}" for t in takes.split(",")] if takes else TUNING
+    for take in takes:
         path = DAZ / f"{take}.bvh.gz"
         rig, channels, location, fps = read_rig_take(path, skip_frames=6)
         kb = kb_without(full, subject_of(path))
@@ -66,11 +76,17 @@ def main(out, names=CANDIDATES):
             on_copies = job.candidates(interpolate_channels(seen, probe), location,
                                        gaps | probe, names)
             on_gaps = job.candidates(seen, location, gaps, names)
-            for name in names:
-                saved[f"copy_{name}"] = job._errors(on_copies[name], truth, copies)
-                saved[f"gap_{name}"] = job._errors(
-                    on_gaps[name], truth, [(i, b, a, e - a + 1) for i, (b, a, e) in
-                                           enumerate(runs)])
+            listed = [(i, b, a, e - a + 1) for i, (b, a, e) in enumerate(runs)]
+            for where, made, mask, where_copies in (("copy", on_copies, gaps | probe, copies),
+                                                    ("gap", on_gaps, gaps, listed)):
+                for name in names:
+                    saved[f"{where}_{name}"] = job._errors(made[name], truth, where_copies)
+                if {"match", "hermite"} <= set(made):
+                    for base in ("interp", "hermite"):
+                        for share in SHARES:
+                            saved[f"{where}_{base}_m{share}"] = job._errors(
+                                halfway(made[base], made["match"], mask, share), truth,
+                                where_copies)
             np.savez(out / f"{Path(take).name}_{label}.npz", **saved)
             print(take, label, {k: round(float(np.sqrt(v.sum() / max(1, (saved["gap_len"] * saved["gap_joints"]).sum())) * 1000), 1)
                                 for k, v in saved.items() if k.startswith("gap_") and k not in ("gap_len", "gap_joints")},
