@@ -11,7 +11,8 @@ frames:
   arriving with the velocities the keys show (damped on gaps over ``HERMITE_SECONDS``);
 - ``match``: motion matching in rotation space (:func:`~.matching.match_windows`): the
   knowledge-base windows of consecutive poses whose bone rotations move most like the take's
-  over the gap and half a second either side (where the gapped bones are keyed too), at a few
+  over the gap and half a second either side (where the gapped bones are keyed too), matched
+  in overlapping pieces of 0.5 s (1 s where several bones are gapped together) at a few
   playback speeds; each gapped bone takes the windows' mean rotation, times an offset slerped
   across the gap from what meets the keys at either end. Needs a knowledge base built from
   armature takes of the same skeleton (``KnowledgeBase.turns``). The take's own stretches
@@ -22,7 +23,8 @@ frames:
   (:func:`~.models.soft_poses`, the take's own complete poses added to the KB); then,
   top-down, each gapped bone takes the rotation that best carries its rigid subtree - its
   descendants posed by their own keys - onto those joints (:func:`carry_subtrees`);
-- ``auto`` (the default): per gap ``match``, ``mix`` (half-way from ``hermite`` to ``match``)
+- ``auto`` (the default): per gap ``match``, ``mix`` (a quarter of the way from ``hermite`` to
+  ``match``)
   or ``interp``, as copies of the gap - same bone, same length, placed where the bone is
   keyed - refilled by each say (:meth:`_Job.auto`); with a knowledge base of positions only,
   ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees carried onto
@@ -52,11 +54,13 @@ BONE_METHODS = ("auto", "knn", "match", "interp", "hermite", "slerp", "positions
 BONE_BASELINES = ("interp", "hermite", "slerp")
 #: every candidate a gap can take (``half``: half-way from ``interp`` to ``knn``; ``recall``:
 #: the subtree carried onto the knowledge base's guess from the known joints alone; ``mix``:
-#: half-way from ``hermite`` to ``match``)
+#: :data:`MIX_SHARE` of the way from ``hermite`` to ``match``)
 CANDIDATES = ("interp", "hermite", "knn", "half", "recall", "match", "mix")
 #: what ``auto`` chooses from beside ``interp``: with a knowledge base of bone rotations, and
 #: without one (built from positions alone, or by an older version)
 AUTO_CANDIDATES = ("match", "mix")
+#: how far ``mix`` goes from ``hermite`` towards ``match`` (tuned, docs/METHOD_NOTES.md)
+MIX_SHARE = 0.25
 AUTO_POSITIONS = ("knn", "half", "recall")
 NEEDS_KB = ("auto", "knn", "match", "positions")
 #: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
@@ -83,6 +87,10 @@ STAY = 0.5
 #: bones count there against any other bone
 MATCH_CONTEXT = 0.5
 MATCH_CONTEXT_WEIGHT = 4.0
+#: seconds of the pieces ``match`` matches a stretch in, where one bone is gapped there and
+#: where several are (tuned, docs/METHOD_NOTES.md)
+MATCH_PIECE = 0.5
+MATCH_PIECE_MANY = 1.0
 MATCH_OWN = True
 MATCH_DAMP = True
 
@@ -286,8 +294,16 @@ class _Job:
             source = np.concatenate([kb.source_index, own_source + kb.source_index.max() + 1])
         else:
             source = kb.source_index
-        predicted = match_windows(features, weight, kb_features, source, self.fps, kb.fps,
-                                  stretches)
+        # matched in pieces: short ones where one bone is gapped (the rest of the body says
+        # much), longer ones where several are
+        predicted = [None] * len(stretches)
+        for width in (MATCH_PIECE, MATCH_PIECE_MANY):
+            chosen = [i for i, (lo, hi) in enumerate(stretches)
+                      if (gap[lo:hi + 1].any(axis=0).sum() == 1) == (width == MATCH_PIECE)]
+            found = match_windows(features, weight, kb_features, source, self.fps, kb.fps,
+                                  [stretches[i] for i in chosen], width=width)
+            for i, mean in zip(chosen, found):
+                predicted[i] = mean
         for (first, last), (lo, hi), mean in zip(busy, stretches, predicted):
             if mean is None:
                 continue
@@ -348,7 +364,7 @@ class _Job:
         if {"match", "mix"} & set(names) and self.kb.turns is not None:
             out["match"] = self.match(out["interp"], fillable)
             if "mix" in names:
-                out["mix"] = halfway(out["hermite"], out["match"], gaps)
+                out["mix"] = halfway(out["hermite"], out["match"], gaps, MIX_SHARE)
         if "recall" in names:
             out["recall"] = carry_subtrees(self.rig, out["interp"], fillable,
                                            self.predict(out["interp"], fillable), self.moves,

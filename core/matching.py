@@ -18,7 +18,7 @@ TOP = 5
 
 
 def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretches,
-                  speeds=SPEEDS, top=TOP):
+                  speeds=SPEEDS, top=TOP, width=None):
     """Per stretch ``(lo, hi)`` of take frames: the mean, over the ``top`` best windows of the
     knowledge base, of their features at each frame lo..hi (an array (hi - lo + 1, items, d)),
     or None where the knowledge base has no window that long.
@@ -27,42 +27,64 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     (0: unknown); ``kb_features`` (poses, items, d) at ``kb_fps``, consecutive poses of one
     ``kb_source`` being consecutive frames. A window's cost is its weighted sum of squared
     feature differences over the stretch, sampled at the knowledge base's rate; windows of one
-    source closer than half their width to a better one are left out.
+    source closer than half their width to a better one are left out. ``width`` (seconds):
+    match pieces of the stretch this long, a quarter of it apart, instead of the whole stretch,
+    and blend their means with overlapping triangles (the first and last piece reach the
+    stretch's ends in full).
     """
     flat = kb_features.reshape(len(kb_features), -1)
     sq = (kb_features.astype(np.float64) ** 2).sum(axis=2)
     out = []
     for lo, hi in stretches:
-        found = []
+        frames = np.arange(lo, hi + 1)
+        half = (hi - lo) / 2 if width is None else min(width * fps, hi - lo) / 2
+        count = 1 if width is None else int(np.ceil((hi - lo - 2 * half) / (half / 2) - 1e-9)) + 1
+        centres = np.linspace(lo + half, hi - half, count)
+        found = [[] for _ in centres]
         for speed in speeds:
             step = speed * fps / kb_fps  # take frames per knowledge-base pose
             times = lo + step * np.arange(int((hi - lo) / step) + 1)
-            width = len(times)
-            if width > len(flat):
+            if len(times) > len(flat):
                 continue
             q, w = _sample(features, weight, times)
-            cost = _window_costs(q, w, flat, sq)
-            cost = np.where(kb_source[:len(cost)] == kb_source[width - 1:], cost, np.inf)
-            for t in np.argsort(cost)[:top * 4]:
-                if np.isfinite(cost[t]):
-                    found.append((cost[t], speed, int(t), width))
-        found.sort()
-        chosen = []
-        for c, speed, t, width in found:
-            if all(kb_source[t] != kb_source[t2] or abs(t - t2) >= width // 2
-                   for _, _, t2, _ in chosen):
-                chosen.append((c, speed, t, width))
-            if len(chosen) == top:
-                break
-        if not chosen:
-            out.append(None)
-            continue
-        frames = np.arange(lo, hi + 1)
-        mean = np.zeros((len(frames),) + kb_features.shape[1:])
-        for _, speed, t, width in chosen:
-            mean += at_times(kb_features[t:t + width], (frames - lo) * kb_fps / (speed * fps),
-                             width - 1)
-        out.append(mean / len(chosen))
+            sums = _diagonal_sums(q, w, flat, sq)
+            for piece, centre in enumerate(centres):
+                first = int(np.ceil((centre - half - lo) / step - 1e-9))
+                last = min(int((centre + half - lo) / step + 1e-9), len(times) - 1)
+                span = last - first + 1
+                if span < 2:
+                    continue
+                cost = sums[last, span - 1:].copy()
+                if first:
+                    cost[1:] -= sums[first - 1, :len(flat) - span]
+                cost = cost / max(w[first:last + 1].sum(), 1e-12)
+                cost = np.where(kb_source[:len(cost)] == kb_source[span - 1:], cost, np.inf)
+                for t in np.argsort(cost)[:top * 4]:
+                    if np.isfinite(cost[t]):
+                        found[piece].append((cost[t], speed, int(t), span, times[first]))
+        total = np.zeros((len(frames),) + kb_features.shape[1:])
+        share = np.zeros(len(frames))
+        for piece, (centre, candidates) in enumerate(zip(centres, found)):
+            chosen = []
+            for candidate in sorted(candidates):
+                if all(kb_source[candidate[2]] != kb_source[c[2]] or
+                       abs(candidate[2] - c[2]) >= candidate[3] // 2 for c in chosen):
+                    chosen.append(candidate)
+                if len(chosen) == top:
+                    break
+            if not chosen:
+                continue
+            taper = np.clip(1 - np.abs(frames - centre) / max(half, 1e-9), 0, 1)
+            taper[(frames < centre) & (piece == 0)] = 1.0
+            taper[(frames > centre) & (piece == len(centres) - 1)] = 1.0
+            near = taper > 0
+            mean = 0.0
+            for _, speed, t, span, start in chosen:  # pose t is the take's frame ``start``
+                poses = np.clip((frames[near] - start) * kb_fps / (speed * fps), 0, span - 1)
+                mean = mean + at_times(kb_features[t:t + span], poses, span - 1)
+            total[near] += taper[near, None, None] * mean / len(chosen)
+            share[near] += taper[near]
+        out.append(total / share[:, None, None] if share.all() else None)
     return out
 
 
@@ -89,12 +111,14 @@ def _sample(features, weight, times):
             np.minimum(weight[i0], weight[i1]))
 
 
-def _window_costs(q, w, flat, sq):
-    """Per start pose, the weighted squared distance of the window to ``q``, over ``w``'s sum."""
-    n, width = len(flat), len(q)
+def _diagonal_sums(q, w, flat, sq):
+    """(rows, poses): entry ``[k, j]`` the weighted squared distance of query rows ..k to
+    knowledge-base poses ..j laid along one diagonal (row k against pose j, row k - 1 against
+    pose j - 1, ...), so a window of rows a..b starting at pose t costs
+    ``[b, t + b - a] - [a - 1, t - 1]`` (the second term 0 where a or t is 0)."""
+    width = len(q)
     qw = (q * w[..., None]).reshape(width, -1)
-    d = w @ sq.T - 2.0 * (qw @ flat.T) + (w * (q ** 2).sum(axis=2)).sum(axis=1)[:, None]
-    cost = np.zeros(n - width + 1)
-    for k in range(width):
-        cost += d[k, k:k + n - width + 1]
-    return cost / max(w.sum(), 1e-12)
+    sums = w @ sq.T - 2.0 * (qw @ flat.T) + (w * (q ** 2).sum(axis=2)).sum(axis=1)[:, None]
+    for k in range(1, width):
+        sums[k, 1:] += sums[k - 1, :-1]
+    return sums

@@ -191,6 +191,27 @@ def test_window_search_finds_the_stretch_the_knowledge_base_holds():
     assert none is None  # no window that long
 
 
+def test_window_search_in_pieces_joins_motion_the_knowledge_base_holds_in_parts():
+    """The stretch is in the knowledge base only in two overlapping parts, in two sources: no
+    window holds all of it, but every piece of 0.5 s lies in one of them, and the pieces'
+    blend gives it back."""
+    rng = np.random.default_rng(1)
+    walk = np.cumsum(rng.normal(size=(400, 5, 6)), axis=0)
+    weight = np.ones(walk.shape[:2])
+    weight[200:240, 2] = 0.0
+    other = np.cumsum(rng.normal(size=(600, 5, 6)), axis=0)
+    kb = np.concatenate([other[:200], walk[150:251], other[200:400], walk[190:291],
+                         other[400:]]).astype(np.float32)
+    source = np.repeat([0, 1], [501, len(kb) - 501])  # the parts lie in two sources
+    [whole] = match_windows(walk, weight, kb, source, 80.0, 100.0, [(150, 290)], top=1)
+    [pieces] = match_windows(walk, weight, kb, source, 80.0, 100.0, [(150, 290)], top=1,
+                             width=0.5)
+    scale = np.abs(walk).max()
+    assert pieces.shape == (141, 5, 6)
+    assert np.abs(pieces - walk[150:291]).max() < 1e-3 * scale
+    assert np.abs(whole - walk[150:291]).max() > 0.05 * scale
+
+
 def test_knowledge_base_keeps_bone_rotations(data_dir, tmp_path):
     path = data_dir / WALK
     kb = build_kb([path], fps=60, skip_frames=6, stride=2)
