@@ -59,7 +59,8 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
                     cost[1:] -= sums[first - 1, :len(flat) - span]
                 cost = cost / max(w[first:last + 1].sum(), 1e-12)
                 cost = np.where(kb_source[:len(cost)] == kb_source[span - 1:], cost, np.inf)
-                for t in np.argsort(cost)[:top * 4]:
+                best = np.argpartition(cost, min(top * 4, len(cost)) - 1)[:top * 4]
+                for t in best[np.argsort(cost[best])]:
                     if np.isfinite(cost[t]):
                         found[piece].append((cost[t], speed, int(t), span, times[first]))
         total = np.zeros((len(frames),) + kb_features.shape[1:])

@@ -251,11 +251,11 @@ def test_bvh_armature_fill_beats_blender_interpolation(daz_armature, daz_kb, dat
                               for x in (after, broken))
         print(f"{bone} {first}-{last}: default fill {fill_mm:.1f} mm, Blender's interpolation "
               f"{interp_mm:.1f} mm")
-        # measured 118.3 / 94.3 / 5.3 vs 130.0 / 83.8 / 7.4: the shin gap comes out worse (the
-        # copies of it the default checks said otherwise; docs/METHOD_NOTES.md)
-        assert fill_mm <= 1.25 * interp_mm + 2.0
+        # measured 106.5 / 75.2 / 7.4 vs 130.0 / 83.8 / 7.4 (session 8: the shin gap came out
+        # worse, 94.3); issue 14's bar per gap
+        assert fill_mm <= 1.1 * interp_mm + 2.0
         totals = [t + x ** 2 * (last - first + 1) for t, x in zip(totals, (fill_mm, interp_mm))]
-    # over the three gaps together: measured 2.7 % better (RMSE)
+    # over the three gaps together: measured 16 % better (RMSE; session 8: 2.7 %)
     assert totals[0] < totals[1]
     # joints no gap reaches did not move
     missing = bridge.missing_points(broken, bone_gaps)
