@@ -3,7 +3,8 @@ repository. In background mode (``-b -- build``) it builds the demo scene with t
 code and saves it; in the GUI it opens that scene, fills it with the UI operator (invoked: modal,
 progress, Esc to cancel), shows the recovered motion and a ghost of the original, builds a
 knowledge base from a folder, then imports the real CMU marker take 01_01 and fills its real gaps
-with the starter knowledge base, taking screenshots. Prints 'mocap_gapfill: ...' lines."""
+with the starter knowledge base, and opens the panel's armature sample (CMU 03_02, three bones'
+keys deleted) and fills it, taking screenshots. Prints 'mocap_gapfill: ...' lines."""
 
 import subprocess
 import sys
@@ -178,6 +179,8 @@ def step():
         say("fill of 01_01 invoked:", result)
         state["step"] = 5
         return 0.1
+    if state["step"] >= 7:
+        return sample_step(state, window, area, wm)
     if wm.mocap_gapfill.running:
         return 0.1
     root = bpy.data.objects["01_01"]
@@ -196,6 +199,52 @@ def step():
         state["step"] = 6
         return 1.0
     shot("4_real_markers_filled")
+    # the panel's "Sample: Armature": CMU 03_02 through Blender's BVH importer, three bones'
+    # keys deleted, the starter knowledge base without subject 03
+    with bpy.context.temp_override(window=window, area=area):
+        result = bpy.ops.mocap_gapfill.open_sample("EXEC_DEFAULT", kind="ARMATURE")
+    arm = bpy.context.view_layer.objects.active
+    state["sample"] = arm.name
+    say("sample armature:", result, arm.name, len(arm.mocap_gapfill.gaps), "gaps:",
+        [(g.point, g.first, g.last) for g in arm.mocap_gapfill.gaps], "knowledge base:",
+        bpy.context.scene.mocap_gapfill.kb_path)
+    frame_object(arm, area, 170)
+    state["step"] = 7
+    return 1.0
+
+
+def frame_object(obj, area, frame):
+    """Select ``obj`` alone, go to ``frame`` and frame it in the 3D View."""
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o == obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.context.scene.frame_set(frame)
+    region = [r for r in area.regions if r.type == "WINDOW"][0]
+    with bpy.context.temp_override(window=bpy.context.window_manager.windows[0], area=area,
+                                   region=region):
+        bpy.ops.view3d.view_selected()
+
+
+def sample_step(state, window, area, wm):
+    arm = bpy.data.objects[state["sample"]]
+    if state["step"] == 7:
+        shot("5_sample_armature_gaps")
+        with bpy.context.temp_override(window=window, area=area):
+            result = bpy.ops.mocap_gapfill.fill_gaps("INVOKE_DEFAULT", scope="ALL",
+                                                     objects=arm.name)
+        say("fill of the sample armature invoked:", result)
+        state["step"] = 8
+        return 0.1
+    if state["step"] == 8:
+        if wm.mocap_gapfill.running:
+            return 0.1
+        say("sample armature filled:", sum(g.filled for g in arm.mocap_gapfill.gaps), "of",
+            len(arm.mocap_gapfill.gaps), "gaps; showing", arm.mocap_gapfill.showing,
+            "action:", arm.animation_data.action.name)
+        frame_object(arm, area, 170)
+        state["step"] = 9
+        return 1.0
+    shot("6_sample_armature_filled")
     bpy.ops.wm.quit_blender()
     return None
 
