@@ -64,14 +64,21 @@ MIX_SHARE = 0.25
 AUTO_POSITIONS = ("knn", "half", "recall")
 NEEDS_KB = ("auto", "knn", "match", "positions")
 #: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
-#: of interpolation's (the better candidate where both are; tuned on non-test subjects,
-#: docs/METHOD_NOTES.md)
-PROMOTE = 0.8
+#: of interpolation's (the better candidate where both are), on gaps of :data:`LONG_GAP`
+#: seconds or more and on shorter ones, where interpolation is hard to beat (tuned on non-test
+#: subjects, docs/METHOD_NOTES.md)
+PROMOTE = 0.9
+PROMOTE_SHORT = 0.7
 #: weight (in copies) of the take's mean over all copies in each gap's score
 SHRINK = 1.0
-#: where no gap of a take could be copied: ``match`` for gaps of at least this many seconds,
-#: ``mix`` for shorter ones (``half`` for all without bone rotations)
-LONG_GAP = 1.0
+#: how far ``auto`` may go from ``interp`` towards the chosen candidate: per gap the share
+#: whose blend refills the gap's copies best; gaps under :data:`LONG_GAP` seconds go at most
+#: three quarters of the way
+AUTO_SHARES = (0.25, 0.5, 0.75, 1.0)
+SHORT_SHARES = (0.25, 0.5, 0.75)
+#: gaps of this many seconds or more are long (above); where no gap of a take could be copied,
+#: they take ``match`` and shorter ones ``mix`` (``half`` for all without bone rotations)
+LONG_GAP = 0.5
 #: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
 AUTO_COPIES = 3
 COPY_MARGIN = 10
@@ -373,9 +380,11 @@ class _Job:
 
     def auto(self, channels, location, gaps):
         """Per gap, the candidate (:data:`AUTO_CANDIDATES`, or :data:`AUTO_POSITIONS` where the
-        knowledge base holds no bone rotations) that refills copies of the gap - same bone,
-        same length, where the bone is keyed - best, if it does so below :data:`PROMOTE` of
-        interpolation's error; interpolation otherwise. A gap without copies is scored on the
+        knowledge base holds no bone rotations) and the share of the way to it from
+        interpolation (:data:`AUTO_SHARES`, :data:`SHORT_SHARES` on short gaps) that refill
+        copies of the gap - same bone, same length, where the bone is keyed - best, if they do
+        so below :data:`PROMOTE` (:data:`PROMOTE_SHORT`) of interpolation's error;
+        interpolation otherwise. A gap without copies is scored on the
         take's copies of other gaps; a take without any takes ``match`` on gaps of
         :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all)."""
         seen = basis_matrices(self.rig, channels, location)
@@ -387,8 +396,8 @@ class _Job:
         names = AUTO_CANDIDATES if rotations else AUTO_POSITIONS
         copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
         runs = gap_runs(gaps)
-        choice = [names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps else names[1]
-                  for _, a, e in runs]
+        choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps else names[1],
+                   1.0) for _, a, e in runs]
         if copies:
             probe = np.zeros_like(gaps)
             for _, b, start, length in copies:
@@ -398,31 +407,42 @@ class _Job:
                                   interpolate_channels(location, probe), location)
             tried = self.candidates(hidden, hidden_loc, gaps | probe, ("interp",) + names)
             truth = self.world(seen)
-            errors = {name: self._errors(basis, truth, copies) for name, basis in tried.items()}
+            base = self._errors(tried["interp"], truth, copies)
             # log error ratio to interpolation per copy (1 mm^2 per joint and frame keeps still
             # bones at 0); per gap the mean over its copies, shrunk towards the take's mean
             floor = np.array([1e-6 * c[3] * (self.below[c[1]].sum() + 1) for c in copies])
             owner = np.array([c[0] for c in copies])
-            ratio = {name: np.log((errors[name] + floor) / (errors["interp"] + floor))
-                     for name in names}
-            for i in range(len(runs)):
+            ratio = {}
+            for name in names:
+                for share in AUTO_SHARES:
+                    blend = halfway(tried["interp"], tried[name], gaps | probe, share)
+                    ratio[name, share] = np.log((self._errors(blend, truth, copies) + floor)
+                                                / (base + floor))
+            for i, (_, a, e) in enumerate(runs):
+                long = (e - a + 1) >= LONG_GAP * self.fps
+                shares = AUTO_SHARES if long else SHORT_SHARES
                 own = owner == i
-                score = {name: (r[own].sum() + SHRINK * r.mean()) / (own.sum() + SHRINK)
-                         for name, r in ratio.items()}
+                score = {key: (r[own].sum() + SHRINK * r.mean()) / (own.sum() + SHRINK)
+                         for key, r in ratio.items() if key[1] in shares}
                 best = min(score, key=score.get)
-                choice[i] = best if score[best] < np.log(PROMOTE) else "interp"
-        counts = {name: choice.count(name) for name in ("interp",) + names if choice.count(name)}
+                bar = PROMOTE if long else PROMOTE_SHORT
+                choice[i] = best if score[best] < np.log(bar) else ("interp", 0.0)
+        counts = {}
+        for name, share in choice:
+            counts[name] = counts.get(name, 0) + 1
         self.report("auto: " + ", ".join(f"{name} on {n} of {len(runs)} gaps"
                                          for name, n in counts.items()))
         wanted = np.zeros_like(gaps)
-        for (b, a, e), name in zip(runs, choice):
+        for (b, a, e), (name, _) in zip(runs, choice):
             wanted[a:e + 1, b] = name != "interp"
         if not wanted.any():
             return seen
-        made = self.candidates(channels, location, wanted, set(choice))
+        made = self.candidates(channels, location, wanted, {name for name, _ in choice})
         out = seen.copy()
-        for (b, a, e), name in zip(runs, choice):
-            out[a:e + 1, b] = made[name][a:e + 1, b]
+        for (b, a, e), (name, share) in zip(runs, choice):
+            if name != "interp":
+                out[a:e + 1, b] = halfway(seen[a:e + 1, b:b + 1], made[name][a:e + 1, b:b + 1],
+                                          np.ones((e - a + 1, 1), bool), share)[:, 0]
         return out
 
     def _errors(self, basis, truth, copies):

@@ -2,7 +2,8 @@
 candidate of ``bonefill.CANDIDATES`` on the bones protocol's gaps and on the gaps' copies (what
 ``auto`` sees), on Daz-friendly takes that are NOT test takes of docs/EVALUATION.md, the take's
 subject out of the knowledge base (which holds no test take either). Writes one npz per take
-and setting (squared joint errors per gap and per copy, per candidate) for the selection rules
+and setting (squared joint errors per gap and per copy, per candidate, and each candidate's squared
+deviation from ``interp``, ``*_dev``) for the selection rules
 to be compared offline (docs/METHOD_NOTES.md). Where ``match`` and ``hermite`` are among the
 candidates, blends of ``interp`` and ``hermite`` towards ``match`` are saved too
 (``interp_m0.25`` ... ``hermite_m1.0``: that share of the way to ``match``).
@@ -79,8 +80,12 @@ def main(out, names=CANDIDATES):
             listed = [(i, b, a, e - a + 1) for i, (b, a, e) in enumerate(runs)]
             for where, made, mask, where_copies in (("copy", on_copies, gaps | probe, copies),
                                                     ("gap", on_gaps, gaps, listed)):
+                shown = job.world(made["interp"])
                 for name in names:
                     saved[f"{where}_{name}"] = job._errors(made[name], truth, where_copies)
+                    # how far the candidate moves the joints from what Blender shows: known
+                    # when filling, unlike the error
+                    saved[f"{where}_{name}_dev"] = job._errors(made[name], shown, where_copies)
                 if {"match", "hermite"} <= set(made):
                     for base in ("interp", "hermite"):
                         for share in SHARES:
