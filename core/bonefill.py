@@ -427,11 +427,14 @@ class _Job:
                 best = min(score, key=score.get)
                 bar = PROMOTE if long else PROMOTE_SHORT
                 choice[i] = best if score[best] < np.log(bar) else ("interp", 0.0)
-        counts = {}
+        counts, partly = {}, {}
         for name, share in choice:
             counts[name] = counts.get(name, 0) + 1
-        self.report("auto: " + ", ".join(f"{name} on {n} of {len(runs)} gaps"
-                                         for name, n in counts.items()))
+            partly[name] = partly.get(name, 0) + (0 < share < 1)
+        self.report("auto: " + ", ".join(
+            f"{name} on {n} of {len(runs)} gaps"
+            + (f" ({partly[name]} part of the way from the interpolation)" if partly[name] else "")
+            for name, n in counts.items()))
         wanted = np.zeros_like(gaps)
         for (b, a, e), (name, _) in zip(runs, choice):
             wanted[a:e + 1, b] = name != "interp"
