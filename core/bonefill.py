@@ -65,17 +65,17 @@ AUTO_POSITIONS = ("knn", "half", "recall")
 NEEDS_KB = ("auto", "knn", "match", "positions")
 #: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
 #: of interpolation's (the better candidate where both are), on gaps of :data:`LONG_GAP`
-#: seconds or more and on shorter ones, where interpolation is hard to beat (tuned on non-test
-#: subjects, docs/METHOD_NOTES.md)
+#: seconds or more and on shorter ones, where interpolation is hard to beat: part of the way
+#: there below ``PROMOTE_SHORT``, all the way only below ``PROMOTE_SHORT_WHOLE`` (tuned on
+#: non-test subjects, docs/METHOD_NOTES.md)
 PROMOTE = 0.9
 PROMOTE_SHORT = 0.7
+PROMOTE_SHORT_WHOLE = 0.3
 #: weight (in copies) of the take's mean over all copies in each gap's score
 SHRINK = 1.0
 #: how far ``auto`` may go from ``interp`` towards the chosen candidate: per gap the share
-#: whose blend refills the gap's copies best; gaps under :data:`LONG_GAP` seconds go at most
-#: three quarters of the way
+#: whose blend refills the gap's copies best
 AUTO_SHARES = (0.25, 0.5, 0.75, 1.0)
-SHORT_SHARES = (0.25, 0.5, 0.75)
 #: gaps of this many seconds or more are long (above); where no gap of a take could be copied,
 #: they take ``match`` and shorter ones ``mix`` (``half`` for all without bone rotations)
 LONG_GAP = 0.5
@@ -381,10 +381,10 @@ class _Job:
     def auto(self, channels, location, gaps):
         """Per gap, the candidate (:data:`AUTO_CANDIDATES`, or :data:`AUTO_POSITIONS` where the
         knowledge base holds no bone rotations) and the share of the way to it from
-        interpolation (:data:`AUTO_SHARES`, :data:`SHORT_SHARES` on short gaps) that refill
-        copies of the gap - same bone, same length, where the bone is keyed - best, if they do
-        so below :data:`PROMOTE` (:data:`PROMOTE_SHORT`) of interpolation's error;
-        interpolation otherwise. A gap without copies is scored on the
+        interpolation (:data:`AUTO_SHARES`) that refill copies of the gap - same bone, same
+        length, where the bone is keyed - best, if they do so below :data:`PROMOTE` of
+        interpolation's error (short gaps: :data:`PROMOTE_SHORT`, all the way only below
+        :data:`PROMOTE_SHORT_WHOLE`); interpolation otherwise. A gap without copies is scored on the
         take's copies of other gaps; a take without any takes ``match`` on gaps of
         :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all)."""
         seen = basis_matrices(self.rig, channels, location)
@@ -420,13 +420,12 @@ class _Job:
                                                 / (base + floor))
             for i, (_, a, e) in enumerate(runs):
                 long = (e - a + 1) >= LONG_GAP * self.fps
-                shares = AUTO_SHARES if long else SHORT_SHARES
                 own = owner == i
                 score = {key: (r[own].sum() + SHRINK * r.mean()) / (own.sum() + SHRINK)
-                         for key, r in ratio.items() if key[1] in shares}
-                best = min(score, key=score.get)
-                bar = PROMOTE if long else PROMOTE_SHORT
-                choice[i] = best if score[best] < np.log(bar) else ("interp", 0.0)
+                         for key, r in ratio.items()}
+                passed = {key: value for key, value in score.items() if value < np.log(
+                    PROMOTE if long else PROMOTE_SHORT_WHOLE if key[1] == 1 else PROMOTE_SHORT)}
+                choice[i] = min(passed, key=passed.get) if passed else ("interp", 0.0)
         counts, partly = {}, {}
         for name, share in choice:
             counts[name] = counts.get(name, 0) + 1

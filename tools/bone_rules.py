@@ -26,7 +26,7 @@ def blend(interp, cand, dev, share):
 
 
 def choose(z, cands=("match", "mix"), shares=ALL, promote=0.8, short_shares=None,
-           short_promote=None, long_gap=1.0, shrink=1.0):
+           short_promote=None, long_gap=1.0, shrink=1.0, short_whole=None):
     """(candidate, share) per gap: the one whose blend refills the gap's copies best (log
     ratio to ``interp``, the take's mean over all copies mixed in with weight ``shrink``),
     if below ``promote``; gaps under ``long_gap`` seconds use the ``short_*`` values; a take
@@ -48,8 +48,9 @@ def choose(z, cands=("match", "mix"), shares=ALL, promote=0.8, short_shares=None
         own = owner == i
         score = {k: (r[own].sum() + shrink * r.mean()) / (own.sum() + shrink)
                  for k, r in ratio.items() if k[1] in allowed}
-        best = min(score, key=score.get)
-        out[i] = best if score[best] < np.log(bar) else ("interp", 0.0)
+        passed = {k: v for k, v in score.items()
+                  if v < np.log(short_whole if short and short_whole and k[1] == 1 else bar)}
+        out[i] = min(passed, key=passed.get) if passed else ("interp", 0.0)
     return out
 
 
@@ -72,8 +73,14 @@ def evaluate(runs, **rule):
 RULES = {
     "session 9 (share 1, promote 0.8, 1 s)": dict(shares=(1.0,)),
     "shares, promote 0.8": dict(shares=ALL),
-    "short < 0.5 s: shares to 0.75, promote 0.7; long: all, 0.9 (chosen)":
+    "short < 0.5 s: shares to 0.75, promote 0.7; long: all, 0.9":
         dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7, promote=0.9, long_gap=0.5),
+    "same, short gaps all the way below 0.3 (chosen)":
+        dict(short_shares=ALL, short_whole=0.3, short_promote=0.7, promote=0.9, long_gap=0.5),
+    "same, short gaps all the way below 0.4":
+        dict(short_shares=ALL, short_whole=0.4, short_promote=0.7, promote=0.9, long_gap=0.5),
+    "same, short gaps all the way below 0.5":
+        dict(short_shares=ALL, short_whole=0.5, short_promote=0.7, promote=0.9, long_gap=0.5),
     "same, short < 1 s": dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7, promote=0.9),
     "same, long promote 0.8": dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7,
                                    promote=0.8, long_gap=0.5),
