@@ -23,7 +23,7 @@ import numpy as np
 
 from ..core.motion import UNIT_SCALES, Motion, rigid_marker_pairs, skeleton_limbs, units_for_height
 from ..core.posing import bones_to_blame, points_missing, solve_pose, tail_handles
-from ..core.rig import Rig
+from ..core.rig import Rig, bone_ends, skeleton_basis
 from . import compat
 
 MARKER_SET = "mocap_gapfill_marker_set"  # custom property on the parent empty of a marker set
@@ -493,13 +493,11 @@ def set_scene_timing(scene, fps, first, last):
 def import_armature(context, motion, name, first_frame=1):
     """Make an armature from a skeleton :class:`Motion` (e.g. ASF/AMC): one bone per segment,
     from the parent joint (head) to the joint (tail), plus a short root bone at the root; rest
-    pose = the first complete frame; root location and every rotation keyed per frame, so the
+    pose = the skeleton's own (an ASF's zero pose) or else the first complete frame
+    (:func:`~..core.rig.bone_ends`); root location and every rotation keyed per frame, so the
     tails follow the joints exactly (joints with several children, like the CMU thorax, need a
     bone per child: one bone per joint could not place them all)."""
-    complete = np.flatnonzero(~motion.missing.any(axis=1))
-    if motion.parents is None or not len(complete):
-        raise ValueError("importing as an armature needs a skeleton with a complete frame")
-    rest_pos = motion.positions[complete[0]]
+    heads, tails = bone_ends(motion)  # GapFillError without a complete frame
     arm = bpy.data.armatures.new(name)
     obj = _link(context, bpy.data.objects.new(name, arm))
     obj[TAILS] = True
@@ -507,18 +505,9 @@ def import_armature(context, motion, name, first_frame=1):
     previous_active = context.view_layer.objects.active
     context.view_layer.objects.active = obj
     bpy.ops.object.mode_set(mode="EDIT")
-    for j, label in enumerate(motion.names):
+    for label, head, tail in zip(motion.names, heads, tails):
         bone = arm.edit_bones.new(label)
-        p = motion.parents[j]
-        if p < 0:
-            bone.head, bone.tail = rest_pos[j], rest_pos[j] + np.array([0.0, 0.0, 0.1])
-            continue
-        bone.head = rest_pos[p]
-        step = rest_pos[j] - rest_pos[p]
-        # a zero-length segment still needs a direction: 0.1 mm along the parent's
-        bone.tail = rest_pos[j] if np.linalg.norm(step) > 1e-4 else rest_pos[p] + 1e-4 * (
-            _unit(rest_pos[p] - rest_pos[motion.parents[p]]) if motion.parents[p] >= 0
-            else np.array([0.0, 0.0, 1.0]))
+        bone.head, bone.tail = head, tail
     for j, p in enumerate(motion.parents):
         if p >= 0:
             arm.edit_bones[j].parent = arm.edit_bones[p]
@@ -531,23 +520,13 @@ def import_armature(context, motion, name, first_frame=1):
     rest = _matrices(arm.bones, "matrix_local", n)
     lengths = np.empty(n, dtype=np.float32)
     arm.bones.foreach_get("length", lengths)
-    handles = tail_handles(lengths, motion.parents)
-    reference = np.broadcast_to(np.eye(4), (motion.n_frames, n, 4, 4))
-    present = ~motion.missing
-    roots = np.array([p < 0 for p in motion.parents])
-    rotate = present & ~roots
-    translate = present & roots
-    basis, _ = solve_pose(rest, motion.parents, reference, motion.positions, rotate, translate,
-                          handles)
+    present, parents = ~motion.missing, motion.parents
+    basis = skeleton_basis(rest, parents, lengths, motion.positions, present)
     take = Take(obj.name, "armature", first_frame, motion.names, motion.positions, present,
-                motion.fps, 1.0, np.eye(4), motion.parents,
-                extra={"rest": rest, "basis": reference, "moves": roots,
-                       "modes": tuple("QUATERNION" for _ in range(n)), "handles": handles})
-    write_armature(take, basis, rotate | translate, recovered=False)
+                motion.fps, 1.0, np.eye(4), parents,
+                extra={"rest": rest, "basis": basis, "moves": np.array([p < 0 for p in parents]),
+                       "modes": ("QUATERNION",) * n, "handles": tail_handles(lengths, parents)})
+    write_armature(take, basis, present, recovered=False)
     set_scene_timing(context.scene, motion.fps, first_frame, first_frame + motion.n_frames - 1)
     return obj
 
-
-def _unit(v):
-    length = np.linalg.norm(v)
-    return v / length if length > 1e-9 else np.array([0.0, 0.0, 1.0])

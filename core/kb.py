@@ -17,7 +17,7 @@ import numpy as np
 
 from .errors import GapFillError, ParseError
 from .formats.tabular import load_arrays, scalar, strings
-from .io import (READ_FORMATS, atomic_output, file_suffix, read_motion,
+from .io import (READ_FORMATS, RIG_FORMATS, atomic_output, file_suffix, read_motion,
                  read_rig_take)
 from .normalize import find_reference, frames_of, normalize
 from .upright import upright_warning
@@ -220,9 +220,9 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
     files = motion_files(sources, exclude)
     if not files:
         raise GapFillError("no motion files in the knowledge-base sources")
-    # BVH takes also give their bones' rotations (all of them, or none: one KB, one kind);
-    # not ASF/AMC: the add-on's armature of one takes its rest pose from the take's first frame
-    rigs = all(file_suffix(path) in (".bvh", ".bvh.gz") for path in files) and not read_options
+    # armature takes (BVH, ASF/AMC: rest pose = the ASF's zero pose) also give their bones'
+    # rotations (all of them, or none: one KB, one kind)
+    rigs = all(file_suffix(path) in RIG_FORMATS for path in files) and not read_options
     motions, turns = [], []
     for i, path in enumerate(files):
         if should_cancel and should_cancel():

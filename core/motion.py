@@ -71,6 +71,11 @@ class Motion:
     filled : ndarray, shape (frames, points), bool, or None
         True where a sample was filled by a gap-filling method rather than observed (C3D files
         mark such samples with residual 0). None when nothing was filled.
+    rest : ndarray, shape (points, 3), or None
+        A skeleton's own rest pose where its file defines one (an ASF with every angle zero),
+        metres and axes as ``positions``; armatures built from the motion take it as their rest
+        pose, so bone rotations mean the same across takes of that skeleton. None: the rest pose
+        is the first complete frame.
     """
 
     positions: np.ndarray
@@ -83,6 +88,7 @@ class Motion:
     units: str = "m"
     up_axis: str = "z"
     filled: np.ndarray = None
+    rest: np.ndarray = None
 
     def __post_init__(self):
         pos = np.asarray(self.positions, dtype=np.float64)
@@ -118,6 +124,13 @@ class Motion:
         if filled is not None:
             filled.setflags(write=False)
         object.__setattr__(self, "filled", filled)
+        if self.rest is not None:
+            rest = np.array(self.rest, dtype=np.float64)
+            if rest.shape != pos.shape[1:] or not np.isfinite(rest).all():
+                raise GapFillError(f"rest pose must be finite of shape {pos.shape[1:]}, "
+                                   f"got {rest.shape}")
+            rest.setflags(write=False)
+            object.__setattr__(self, "rest", rest)
         pos.setflags(write=False)
         limbs.setflags(write=False)
         object.__setattr__(self, "positions", pos)
@@ -163,7 +176,8 @@ class Motion:
                 parents.append(remap.get(p, -1))
         return self.replace(positions=self.positions[:, keep], names=tuple(names),
                             parents=parents, limbs=np.array(limbs, dtype=np.int64).reshape(-1, 2),
-                            filled=None if self.filled is None else self.filled[:, keep])
+                            filled=None if self.filled is None else self.filled[:, keep],
+                            rest=None if self.rest is None else self.rest[keep])
 
     def frame_range(self, start, stop=None):
         """The motion restricted to frames ``start:stop`` (Python slice semantics)."""

@@ -237,12 +237,13 @@ def bone_matrix(head, tail, roll=0.0):
 
 def bone_ends(motion):
     """Head and tail (bones, 3) of the one-bone-per-segment armature of a skeleton motion, in
-    its first complete frame: each bone from its parent joint to its joint; a root bone points
-    0.1 m up from the root; a zero-length segment points 0.1 mm along its parent's bone."""
+    its rest pose (``motion.rest``, else its first complete frame): each bone from its parent
+    joint to its joint; a root bone points 0.1 m up from the root; a zero-length segment points
+    0.1 mm along its parent's bone."""
     complete = np.flatnonzero(~motion.missing.any(axis=1))
     if motion.parents is None or not len(complete):
         raise GapFillError("an armature needs a skeleton with a complete frame")
-    pos = motion.positions[complete[0]]
+    pos = motion.positions[complete[0]] if motion.rest is None else motion.rest
     heads, tails = pos.copy(), pos.copy()
     for j, p in enumerate(motion.parents):
         if p < 0:
@@ -259,21 +260,41 @@ def bone_ends(motion):
 def rig_from_motion(motion):
     """The armature the add-on's skeleton import builds for a skeleton motion (one bone per
     segment, joints = bone tails, quaternion rotations) and its channels: ``(rig, channels,
-    location)``, the root's location keyed and every bone's rotation solved from the joints."""
-    from .posing import solve_pose, tail_handles
-
+    location)``, posed by :func:`skeleton_basis`."""
     heads, tails = bone_ends(motion)
     rest = np.stack([bone_matrix(h, t) for h, t in zip(heads, tails)])
     lengths = np.linalg.norm(tails - heads, axis=1)
-    n = motion.n_points
-    rig = Rig(motion.names, motion.parents, rest, ("QUATERNION",) * n, lengths)
-    present = ~motion.missing
-    roots = np.array([p < 0 for p in motion.parents])
-    reference = np.broadcast_to(np.eye(4), (motion.n_frames, n, 4, 4))
-    basis, _ = solve_pose(rest, motion.parents, reference, motion.positions, present & ~roots,
-                          present & roots, tail_handles(lengths, motion.parents))
-    channels = channels_of(basis[..., :3, :3], rig.modes)
-    return rig, channels, basis[..., :3, 3].copy()
+    rig = Rig(motion.names, motion.parents, rest, ("QUATERNION",) * motion.n_points, lengths)
+    basis = skeleton_basis(rest, motion.parents, lengths, motion.positions, ~motion.missing)
+    return rig, channels_of(basis[..., :3, :3], rig.modes), basis[..., :3, 3].copy()
+
+
+def skeleton_basis(rest, parents, lengths, positions, present):
+    """Basis matrices (frames, bones, 4, 4) that put the joints of a one-bone-per-segment
+    armature (a root's head, every other bone's tail) on ``positions`` where ``present``. A root
+    bone is placed on its joint and turned as its children's joints turn from the rest pose
+    (Kabsch; at rest where one of them is missing), as an ASF root turns: the bones below it
+    then hold rotations relative to the body, not to the world."""
+    from .posing import best_rotation, solve_pose, tail_handles
+
+    rest = np.asarray(rest, dtype=float)
+    positions = np.asarray(positions, dtype=float)
+    parents = [int(p) for p in parents]
+    roots = np.array([p < 0 for p in parents])
+    reference = np.tile(np.eye(4), (len(positions), len(parents), 1, 1))
+    rest_joints = rest[:, :3, 3] + rest[:, :3, 1] * np.asarray(lengths)[:, None]
+    for r in np.flatnonzero(roots):
+        kids = [c for c, p in enumerate(parents) if p == r]
+        if len(kids) < 2:
+            continue
+        seen = present[:, kids].all(axis=1) & present[:, r]
+        turn, determined = best_rotation(rest_joints[kids] - rest[r, :3, 3],
+                                         positions[seen][:, kids] - positions[seen][:, [r]])
+        frames = np.flatnonzero(seen)[determined]
+        reference[frames, r, :3, :3] = (rest[r, :3, :3].T @ turn[determined] @ rest[r, :3, :3])
+    basis, _ = solve_pose(rest, parents, reference, positions, present & ~roots,
+                          present & roots, tail_handles(lengths, parents))
+    return basis
 
 
 def hermite_channels(values, gaps, damping=None):

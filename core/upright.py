@@ -83,9 +83,12 @@ def turn_up(motion, up):
         return motion
     if up not in ("y", "z"):
         raise ValueError(f"up must be 'y' or 'z', not {up!r}")
-    raw = z_up_to_y_up(motion.positions) if motion.up_axis == "y" else motion.positions
-    pos = y_up_to_z_up(raw) if up == "y" else raw
-    return motion.replace(positions=pos, up_axis=up)
+    def turned(points):
+        raw = z_up_to_y_up(points) if motion.up_axis == "y" else points
+        return y_up_to_z_up(raw) if up == "y" else raw
+
+    rest = None if motion.rest is None else turned(motion.rest)
+    return motion.replace(positions=turned(motion.positions), up_axis=up, rest=rest)
 
 
 def stand_up(motion):

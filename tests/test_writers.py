@@ -56,6 +56,7 @@ def test_npz_keeps_skeleton(data_dir, tmp_path):
     assert back.parents == motion.parents
     np.testing.assert_array_equal(back.limbs, motion.limbs)
     np.testing.assert_array_equal(back.positions, motion.positions)
+    np.testing.assert_array_equal(back.rest, motion.rest)  # the ASF's zero pose
     assert (back.units, back.up_axis) == ("cmu", "y")
 
 

@@ -304,6 +304,8 @@ def read_asf_amc(amc_path, asf_path=None):
     skeleton = parse_asf(asf_path)
     data, degrees = parse_amc(amc_path, skeleton)
     positions, names = amc_forward_kinematics(skeleton, data, degrees)
+    zero = {name: np.zeros((1, values.shape[1])) for name, values in data.items()}
+    rest, _ = amc_forward_kinematics(skeleton, zero, degrees)
     index = {n: i for i, n in enumerate(names)}
     parents = [-1] + [index[skeleton.bones[n].parent] for n in names[1:]]
     return Motion(
@@ -316,4 +318,5 @@ def read_asf_amc(amc_path, asf_path=None):
         source_format="asf/amc",
         units="cmu" if abs(skeleton.length_scale - 0.45) < 1e-9 else "in",
         up_axis="y",
+        rest=y_up_to_z_up(rest[0] * skeleton.metres_per_unit),
     )

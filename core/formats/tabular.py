@@ -2,7 +2,8 @@
 
 NPZ arrays: ``positions`` (frames, points, 3) float64 metres Z-up with NaN for missing, ``names``
 (unicode), ``fps``; also ``parents`` (empty for markers), ``limbs``, ``filled``, ``units``,
-``up_axis``, ``format_version``. Loaded with ``allow_pickle=False``.
+``up_axis``, ``rest`` (a skeleton's own rest pose, (points, 3); empty without one),
+``format_version``. Loaded with ``allow_pickle=False``.
 
 CSV: a ``# mocap-gapfill csv 1 fps=<fps>`` line, a header ``frame,<name>.x,<name>.y,<name>.z,...``,
 then one row per frame in metres; an empty cell is a missing sample.
@@ -33,6 +34,7 @@ def write_npz(motion, fileobj):
         filled=motion.filled if motion.filled is not None else np.zeros((0, 0), dtype=bool),
         units=np.str_(motion.units),
         up_axis=np.str_(motion.up_axis),
+        rest=motion.rest if motion.rest is not None else np.zeros((0, 3)),
     )
 
 
@@ -103,6 +105,9 @@ def read_npz(path):
     filled = arrays.get("filled")
     units = strings(arrays, "units", (), path)[0] if "units" in arrays else "m"
     up_axis = strings(arrays, "up_axis", (), path)[0] if "up_axis" in arrays else "z"
+    rest = arrays.get("rest")
+    if rest is not None and rest.dtype.kind not in "fiu":
+        raise ParseError("rest must be numbers", path)
     try:
         return Motion(
             positions=positions.astype(np.float64),
@@ -115,6 +120,7 @@ def read_npz(path):
             units=units,
             up_axis=up_axis,
             filled=filled if filled is not None and filled.size else None,
+            rest=rest if rest is not None and rest.size else None,
         )
     except (ValueError, TypeError) as exc:
         raise ParseError(str(exc), path) from None

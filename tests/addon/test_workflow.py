@@ -440,7 +440,7 @@ def daz_armature_name(path):
 
 def test_asf_amc_import_follows_the_joints(scene, data_dir):
     """Our ASF/AMC import: an armature whose bone heads are the file's joints (Blender's own
-    evaluation), rest pose from the first frame, rotations keyed per frame."""
+    evaluation), rest pose = the ASF's zero pose, rotations keyed per frame."""
     from mocap_gapfill.core.io import read_motion
 
     bpy = pytest.importorskip("bpy")
