@@ -103,7 +103,7 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=N
 RIG_FORMATS = (".bvh", ".bvh.gz", ".amc")
 
 
-def read_rig_take(path, skip_frames=0):
+def read_rig_take(path, skip_frames=0, asf=None):
     """A take as an armature: ``(rig, channels, location, fps)``; BVH through Blender's importer
     rules, ASF/AMC through the add-on's import (one bone per segment, quaternions)."""
     from .formats.bvh import read_bvh_rig
@@ -115,7 +115,7 @@ def read_rig_take(path, skip_frames=0):
                          f"{', '.join(RIG_FORMATS)}", path)
     if suffix in (".bvh", ".bvh.gz"):
         return read_bvh_rig(path, skip_frames=skip_frames)
-    motion = read_motion(path, skip_frames=skip_frames)
+    motion = read_motion(path, asf=asf, skip_frames=skip_frames)
     return (*rig_from_motion(motion), motion.fps)
 
 

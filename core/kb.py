@@ -222,7 +222,8 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
         raise GapFillError("no motion files in the knowledge-base sources")
     # armature takes (BVH, ASF/AMC: rest pose = the ASF's zero pose) also give their bones'
     # rotations (all of them, or none: one KB, one kind)
-    rigs = all(file_suffix(path) in RIG_FORMATS for path in files) and not read_options
+    rigs = all(file_suffix(path) in RIG_FORMATS for path in files)
+    asf = (read_options or {}).get("asf")
     motions, turns = [], []
     for i, path in enumerate(files):
         if should_cancel and should_cancel():
@@ -235,7 +236,7 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
             report(f"{path.name}: {warning}")
         motions.append(motion)
         if rigs:
-            turns.append(take_turns(path, skip_frames, motion.n_frames))
+            turns.append(take_turns(path, skip_frames, motion.n_frames, asf))
             rigs = turns[-1] is not None
     kb = kb_from_motions(motions, fps, stride, report, turns if rigs else None)
     if progress:
@@ -243,7 +244,7 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
     return kb
 
 
-def take_turns(path, skip_frames, n_frames):
+def take_turns(path, skip_frames, n_frames, asf=None):
     """``(bone names, quaternions (frames, bones, 4))`` of an armature take
     (:func:`~.rig.aligned_turns`, signs continuous in time); None where the armature's frames
     are not the motion's."""
@@ -251,7 +252,7 @@ def take_turns(path, skip_frames, n_frames):
 
     from .rig import aligned_turns, basis_matrices
 
-    rig, channels, location, _ = read_rig_take(path, skip_frames)
+    rig, channels, location, _ = read_rig_take(path, skip_frames, asf)
     if len(channels) != n_frames:
         return None
     turns = aligned_turns(rig, basis_matrices(rig, channels, location))

@@ -8,6 +8,7 @@ import sys
 import numpy as np
 
 from mocap_gapfill.core.io import read_motion
+from mocap_gapfill.core.kb import load_kb
 
 
 def cli(*args):
@@ -153,6 +154,7 @@ def test_ctrl_c_stops_cleanly_and_writes_nothing(data_dir, tmp_path):
     kb = tmp_path / "kb.npz"
     assert cli("kb", "build", data_dir / "cmu/bvh/daz_friendly/08", "-o", kb, "--skip-frames",
                "6", "--quiet").returncode == 0
+    assert load_kb(kb).turns is not None  # armature takes: the bones' rotations are kept
     take = read_motion(data_dir / "cmu/bvh/daz_friendly/13/13_30.bvh.gz", skip_frames=6)
     miss = punch_gaps(take.n_frames, take.n_points, "joints", (6, 120), np.random.default_rng(0))
     gappy = write_motion(with_gaps(take, miss), tmp_path / "gappy.npz")
