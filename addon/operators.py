@@ -387,7 +387,7 @@ class MOCAP_GAPFILL_OT_build_kb(JobOperator, bpy.types.Operator):
         return JobOperator.invoke(self, context, event)
 
     def prepare(self, context):
-        from ..core.kb import build_kb, kb_from_motions
+        from ..core.kb import build_kb, kb_from_motions, rig_turns
 
         fps = self.fps or bridge.scene_fps(context.scene)
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in self.name) or "kb"
@@ -400,15 +400,18 @@ class MOCAP_GAPFILL_OT_build_kb(JobOperator, bpy.types.Operator):
             def work(progress, should_cancel):
                 return build_kb([folder], fps=fps, progress=progress, should_cancel=should_cancel)
             return work
-        motions = []
+        motions, turns = [], []
         for owner in gaps.takes_in(context):
             take = gaps.read_original(owner, context.scene)
             motions.append(take.motion(gaps.take_missing(owner, take)))
+            if take.kind == "armature":  # armatures also give their bones' rotations
+                turns.append(rig_turns(take.extra["rig"], take.extra["basis"]))
         if not motions:
             raise GapFillError("select the takes to learn from")
+        turns = turns if len(turns) == len(motions) else None
 
         def work(progress, should_cancel):
-            return kb_from_motions(motions, fps=fps)
+            return kb_from_motions(motions, fps=fps, turns=turns)
         return work
 
     def finish(self, context, kb):

@@ -303,12 +303,19 @@ class _Job:
             source = kb.source_index
         # matched in pieces: short ones where one bone is gapped (the rest of the body says
         # much), longer ones where several are
-        predicted = [None] * len(stretches)
+        predicted, before = [None] * len(stretches), 0
         for width in (MATCH_PIECE, MATCH_PIECE_MANY):
             chosen = [i for i, (lo, hi) in enumerate(stretches)
                       if (gap[lo:hi + 1].any(axis=0).sum() == 1) == (width == MATCH_PIECE)]
+
+            def on_stretch(done, before=before):
+                if self.should_cancel and self.should_cancel():
+                    raise KeyboardInterrupt
+                self.progress((before + done) / len(stretches), "matching the knowledge base")
             found = match_windows(features, weight, kb_features, source, self.fps, kb.fps,
-                                  [stretches[i] for i in chosen], width=width)
+                                  [stretches[i] for i in chosen], width=width,
+                                  on_stretch=on_stretch)
+            before += len(chosen)
             for i, mean in zip(chosen, found):
                 predicted[i] = mean
         for (first, last), (lo, hi), mean in zip(busy, stretches, predicted):

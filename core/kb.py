@@ -245,17 +245,24 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
 
 
 def take_turns(path, skip_frames, n_frames, asf=None):
-    """``(bone names, quaternions (frames, bones, 4))`` of an armature take
-    (:func:`~.rig.aligned_turns`, signs continuous in time); None where the armature's frames
-    are not the motion's."""
-    from scipy.spatial.transform import Rotation
-
-    from .rig import aligned_turns, basis_matrices
+    """:func:`rig_turns` of an armature take file; None where the armature's frames are not
+    the motion's."""
+    from .rig import basis_matrices
 
     rig, channels, location, _ = read_rig_take(path, skip_frames, asf)
     if len(channels) != n_frames:
         return None
-    turns = aligned_turns(rig, basis_matrices(rig, channels, location))
+    return rig_turns(rig, basis_matrices(rig, channels, location))
+
+
+def rig_turns(rig, basis):
+    """``(bone names, quaternions (frames, bones, 4))``: an armature's bone rotations as a
+    knowledge base keeps them (:func:`~.rig.aligned_turns`, signs continuous in time)."""
+    from scipy.spatial.transform import Rotation
+
+    from .rig import aligned_turns
+
+    turns = aligned_turns(rig, basis)
     quat = Rotation.from_matrix(turns.reshape(-1, 3, 3)).as_quat().reshape(turns.shape[:2] + (4,))
     flip = np.ones(quat.shape[:2])
     flip[1:] = np.where(np.sum(quat[1:] * quat[:-1], axis=2) < 0, -1.0, 1.0)

@@ -18,7 +18,7 @@ TOP = 5
 
 
 def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretches,
-                  speeds=SPEEDS, top=TOP, width=None):
+                  speeds=SPEEDS, top=TOP, width=None, on_stretch=None):
     """Per stretch ``(lo, hi)`` of take frames: the mean, over the ``top`` best windows of the
     knowledge base, of their features at each frame lo..hi (an array (hi - lo + 1, items, d)),
     or None where the knowledge base has no window that long.
@@ -30,12 +30,15 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     source closer than half their width to a better one are left out. ``width`` (seconds):
     match pieces of the stretch this long, a quarter of it apart, instead of the whole stretch,
     and blend their means with overlapping triangles (the first and last piece reach the
-    stretch's ends in full).
+    stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
+    it may raise to stop).
     """
     flat = kb_features.reshape(len(kb_features), -1)
     sq = (kb_features.astype(np.float64) ** 2).sum(axis=2)
     out = []
-    for lo, hi in stretches:
+    for done, (lo, hi) in enumerate(stretches):
+        if on_stretch:
+            on_stretch(done)
         frames = np.arange(lo, hi + 1)
         half = (hi - lo) / 2 if width is None else min(width * fps, hi - lo) / 2
         count = 1 if width is None else int(np.ceil((hi - lo - 2 * half) / (half / 2) - 1e-9)) + 1

@@ -233,6 +233,21 @@ def test_knowledge_base_keeps_bone_rotations(data_dir, tmp_path):
         load_kb(tmp_path / "bad.npz")
 
 
+def test_rotation_fill_reports_progress_and_stops_when_asked(walk, daz_kb):
+    rig, channels, location, fps = walk
+    gaps = np.zeros(channels.shape[:2], bool)
+    gaps[100:220, rig.names.index("rShin")] = gaps[400:430, rig.names.index("lForeArm")] = True
+    seen = interpolate_channels(channels, gaps)
+    steps = []
+    fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, method="match",
+               progress=lambda fraction, message: steps.append(fraction))
+    assert len(steps) >= 2 and steps == sorted(steps) and steps[-1] < 1
+    for method in ("match", "auto"):
+        with pytest.raises(KeyboardInterrupt):
+            fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, method=method,
+                       should_cancel=lambda: True)
+
+
 def test_asf_amc_armatures_hold_rotations_comparable_across_subjects(data_dir):
     """An ASF/AMC armature rests in the ASF's zero pose and its root turns with the pelvis, so
     its bones hold the skeleton's own rotations; a knowledge base of other subjects' AMC takes

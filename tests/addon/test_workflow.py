@@ -474,6 +474,7 @@ def test_kb_built_from_a_take_and_a_cancelled_fill_changes_nothing(scene):
     assert path.endswith("knowledge_bases/jog.npz") and "extensions" in path
     kb = gaps.load_kb_cached(path)
     assert kb.size == 240 and set(kb.names) == set(skeleton.names)
+    assert kb.turns is not None and "LeftForeArm" in kb.bones  # the rotation fill can use it
 
     remove_bone_keys(arm, [("LeftForeArm", 50, 120)])
     bpy.ops.mocap_gapfill.detect_gaps()
