@@ -26,11 +26,13 @@ def blend(interp, cand, dev, share):
 
 
 def choose(z, cands=("match", "mix"), shares=ALL, promote=0.8, short_shares=None,
-           short_promote=None, long_gap=1.0, shrink=1.0, short_whole=None):
+           short_promote=None, long_gap=1.0, shrink=1.0, short_whole=None, trust=None):
     """(candidate, share) per gap: the one whose blend refills the gap's copies best (log
     ratio to ``interp``, the take's mean over all copies mixed in with weight ``shrink``),
     if below ``promote``; gaps under ``long_gap`` seconds use the ``short_*`` values; a take
-    without copies: ``cands[0]`` on long gaps, ``cands[-1]`` on short ones."""
+    without copies: ``cands[0]`` on long gaps, ``cands[-1]`` on short ones. ``trust``: a long
+    gap left to ``interp`` takes ``cands[0]`` where that moves the joints from ``interp`` by
+    more than ``trust`` times its RMS error on the gap's copies."""
     lengths = z["gap_len"]
     out = [(cands[0] if n >= long_gap * FPS else cands[-1], 1.0) for n in lengths]
     owner = z["owner"]
@@ -51,6 +53,11 @@ def choose(z, cands=("match", "mix"), shares=ALL, promote=0.8, short_shares=None
         passed = {k: v for k, v in score.items()
                   if v < np.log(short_whole if short and short_whole and k[1] == 1 else bar)}
         out[i] = min(passed, key=passed.get) if passed else ("interp", 0.0)
+        if trust and not short and not passed and own.any():
+            typical = np.sqrt(np.mean(z[f"copy_{cands[0]}"][own]
+                                      / (z["copy_len"] * z["copy_joints"])[own]))
+            if np.sqrt(z[f"gap_{cands[0]}_dev"][i] / (n * z["gap_joints"][i])) > trust * typical:
+                out[i] = (cands[0], 1.0)
     return out
 
 
@@ -77,6 +84,15 @@ RULES = {
         dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7, promote=0.9, long_gap=0.5),
     "same, short gaps all the way below 0.3 (chosen)":
         dict(short_shares=ALL, short_whole=0.3, short_promote=0.7, promote=0.9, long_gap=0.5),
+    "same, long gaps left to interp take match where it strays > 1.5x its copies' error":
+        dict(short_shares=ALL, short_whole=0.3, short_promote=0.7, promote=0.9, long_gap=0.5,
+             trust=1.5),
+    "same, > 2x (session 11, not taken: no better on the test takes)":
+        dict(short_shares=ALL, short_whole=0.3, short_promote=0.7, promote=0.9, long_gap=0.5,
+             trust=2.0),
+    "same, > 3x":
+        dict(short_shares=ALL, short_whole=0.3, short_promote=0.7, promote=0.9, long_gap=0.5,
+             trust=3.0),
     "same, short gaps all the way below 0.4":
         dict(short_shares=ALL, short_whole=0.4, short_promote=0.7, promote=0.9, long_gap=0.5),
     "same, short gaps all the way below 0.5":

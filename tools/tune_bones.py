@@ -10,6 +10,10 @@ candidates, blends of ``interp`` and ``hermite`` towards ``match`` are saved too
 
     python tools/tune_bones.py OUTDIR [candidate ...]
     MOCAP_GAPFILL_TUNE_TAKES=01_08,02_05,... python tools/tune_bones.py OUTDIR [candidate ...]
+    MOCAP_GAPFILL_TUNE_AMC=1 python tools/tune_bones.py OUTDIR [candidate ...]
+
+The last: the CMU ASF/AMC takes that are not test takes (07_05, 09_06 and four of the
+unverified ones), against a KB of cmu/asfamc without the test takes (a second skeleton).
 
 (session 9: 01_08, 02_05, 03_02, 05_10, 06_03, 07_05, 08_02, 09_05, 10_03, 11_01, 12_03, 13_10
 with the candidates interp hermite match.)
@@ -35,6 +39,11 @@ DATA = Path(os.environ.get("MOCAP_GAPFILL_DATA",
 DAZ = DATA / "cmu/bvh/daz_friendly"
 TEST_TAKES = ["01_01", "02_02", "05_02", "06_10", "09_12", "10_01", "12_02", "13_30"]
 TUNING = ["03/03_02", "07/07_05", "08/08_02", "11/11_01"]
+AMC = DATA / "cmu/asfamc"
+AMC_TEST_TAKES = ["01_01", "11_01", "131_04", "135_06", "02_01"]  # 02_01: no ASF of its own
+AMC_TUNING = ["07/07_05", "09/09_06", "_unverified/charleston/charleston1",
+              "_unverified/lambada/lambada", "_unverified/pirouette/pirouette",
+              "_unverified/zombie/zombie"]
 SHARES = (0.25, 0.5, 0.75, 1.0)
 
 
@@ -42,18 +51,25 @@ def main(out, names=CANDIDATES):
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = out / "kb.npz"
+    amc = bool(os.environ.get("MOCAP_GAPFILL_TUNE_AMC"))
+    skip = 0 if amc else 6
     if cache.is_file():
         full = load_kb(cache)
+    elif amc:
+        full = build_kb([AMC], fps=60.0, exclude=[f"*{t}.amc" for t in AMC_TEST_TAKES])
+        full.save(cache)
     else:
         full = build_kb([DAZ], fps=60.0, skip_frames=6,
                         exclude=[f"*{t}.bvh*" for t in TEST_TAKES])
         full.save(cache)
     takes = os.environ.get("MOCAP_GAPFILL_TUNE_TAKES")
-    takes = [f"{t[:2]}/{t}" for t in takes.split(",")] if takes else TUNING
+    takes = [f"{t[:2]}/{t}" for t in takes.split(",")] if takes else AMC_TUNING if amc else TUNING
     for take in takes:
-        path = DAZ / f"{take}.bvh.gz"
-        rig, channels, location, fps = read_rig_take(path, skip_frames=6)
+        path = AMC / f"{take}.amc" if amc else DAZ / f"{take}.bvh.gz"
+        rig, channels, location, fps = read_rig_take(path, skip_frames=skip)
         kb = kb_without(full, subject_of(path))
+        if "charleston" in take:  # the two charleston takes are one (unknown) subject
+            kb = kb.subset(np.array(["charleston" not in s for s in kb.sources])[kb.source_index])
         truth = rig.joints(basis_matrices(rig, channels, location))
         for n, l in BONE_SETTINGS:
             label = f"n={n},l={l}"
