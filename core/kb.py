@@ -336,9 +336,10 @@ def match_names(kb, names):
 
 
 #: knowledge bases shipped with the extension, built from CMU motion by
-#: tools/build_starter_kbs.py: the Daz-friendly BVH skeleton (43 joints) and the 41-marker set
+#: tools/build_starter_kbs.py: the Daz-friendly BVH skeleton (43 joints), the 41-marker set and
+#: the CMU ASF skeleton (31 joints)
 STARTER_DIR = Path(__file__).resolve().parents[1] / "sample_scenes"
-STARTER_KBS = ("cmu_daz43_kb.npz", "cmu_markers41_kb.npz")
+STARTER_KBS = ("cmu_daz43_kb.npz", "cmu_markers41_kb.npz", "cmu_asf31_kb.npz")
 
 
 def starter_kb(names):

@@ -391,8 +391,12 @@ def test_starter_knowledge_bases(data_dir, tmp_path):
     assert not any("HDM" in s for s in kb.sources)  # CC BY-SA data stays out of the product
     path, kb = starter_kb(c3d.names)
     assert path.name == "cmu_markers41_kb.npz" and set(kb.names) == set(c3d.names)
-    with pytest.raises(GapFillError, match="no starter knowledge base fits.*lhipjoint"):
-        starter_kb(read_motion(data_dir / "cmu/asfamc/01/01_01.amc").names)
+    amc = read_motion(data_dir / "cmu/asfamc/01/01_01.amc")
+    path, kb = starter_kb(amc.names)
+    assert path.name == "cmu_asf31_kb.npz" and set(kb.names) == set(amc.names)
+    assert kb.turns is not None and "lhumerus" in kb.bones  # for the armature fill
+    with pytest.raises(GapFillError, match="no starter knowledge base fits.*Kopf"):
+        starter_kb(["Kopf", "Hals", "Hand", "Fuss"])
     full = build_kb([data_dir / "cmu/c3d/85_02.c3d"], fps=30)
     full.save(tmp_path / "compact.npz", compact=True)
     np.testing.assert_allclose(load_kb(tmp_path / "compact.npz").poses, full.poses, atol=5e-4)
