@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from mocap_gapfill.core.io import read_motion
+from mocap_gapfill.core.io import read_motion, write_motion
 from mocap_gapfill.core.kb import load_kb
 
 
@@ -95,8 +95,13 @@ def test_kb_build_then_fill(data_dir, tmp_path):
     r = cli("fill", src, "-o", tmp_path / "x.npz", "--method", "pca", "--quiet")
     assert r.returncode == 0 and "starter knowledge base cmu_markers41_kb.npz" in r.stderr
     r = cli("fill", data_dir / "cmu/asfamc/01/01_01.amc", "-o", tmp_path / "y.npz")
+    assert r.returncode == 0 and "starter knowledge base cmu_asf31_kb.npz" in r.stderr
+    unknown = read_motion(data_dir / "cmu/c3d/85_02.c3d").frame_range(0, 200)
+    unknown = unknown.replace(names=tuple(f"P{i}" for i in range(unknown.n_points)))
+    write_motion(unknown, tmp_path / "unknown.npz")
+    r = cli("fill", tmp_path / "unknown.npz", "-o", tmp_path / "z.npz")
     assert r.returncode == 2 and "needs a knowledge base" in r.stderr
-    assert "no starter knowledge base fits this take" in r.stderr and "lhipjoint" in r.stderr
+    assert "no starter knowledge base fits this take" in r.stderr and "P0" in r.stderr
 
 
 def test_evaluate_writes_json(data_dir, tmp_path):
@@ -149,7 +154,6 @@ def test_ctrl_c_stops_cleanly_and_writes_nothing(data_dir, tmp_path):
     import time
 
     from mocap_gapfill.core.evaluate import punch_gaps, with_gaps
-    from mocap_gapfill.core.io import write_motion
 
     kb = tmp_path / "kb.npz"
     assert cli("kb", "build", data_dir / "cmu/bvh/daz_friendly/08", "-o", kb, "--skip-frames",
