@@ -77,35 +77,25 @@ def evaluate(runs, **rule):
     return [np.mean(ratios[s]) for s in settings], worse, gaps
 
 
+#: session 10's first rule (short gaps at most 3/4 of the way) and the chosen one
+PART_WAY = dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7, promote=0.9, long_gap=0.5)
+CHOSEN = dict(PART_WAY, short_shares=ALL, short_whole=0.3)
 RULES = {
     "session 9 (share 1, promote 0.8, 1 s)": dict(shares=(1.0,)),
     "shares, promote 0.8": dict(shares=ALL),
-    "short < 0.5 s: shares to 0.75, promote 0.7; long: all, 0.9":
-        dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7, promote=0.9, long_gap=0.5),
-    "same, short gaps all the way below 0.3 (chosen)":
-        dict(short_shares=ALL, short_whole=0.3, short_promote=0.7, promote=0.9, long_gap=0.5),
+    "short < 0.5 s: shares to 0.75, promote 0.7; long: all, 0.9": PART_WAY,
+    "same, short gaps all the way below 0.3 (chosen)": CHOSEN,
     "same, long gaps left to interp take match where it strays > 1.5x its copies' error":
-        dict(short_shares=ALL, short_whole=0.3, short_promote=0.7, promote=0.9, long_gap=0.5,
-             trust=1.5),
-    "same, > 2x (session 11, not taken: no better on the test takes)":
-        dict(short_shares=ALL, short_whole=0.3, short_promote=0.7, promote=0.9, long_gap=0.5,
-             trust=2.0),
-    "same, > 3x":
-        dict(short_shares=ALL, short_whole=0.3, short_promote=0.7, promote=0.9, long_gap=0.5,
-             trust=3.0),
-    "same, short gaps all the way below 0.4":
-        dict(short_shares=ALL, short_whole=0.4, short_promote=0.7, promote=0.9, long_gap=0.5),
-    "same, short gaps all the way below 0.5":
-        dict(short_shares=ALL, short_whole=0.5, short_promote=0.7, promote=0.9, long_gap=0.5),
-    "same, short < 1 s": dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7, promote=0.9),
-    "same, long promote 0.8": dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7,
-                                   promote=0.8, long_gap=0.5),
-    "same, long promote 1.0": dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7,
-                                   promote=1.0, long_gap=0.5),
-    "same, short promote 0.8": dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.8,
-                                    promote=0.9, long_gap=0.5),
-    "same, short shares to 0.5": dict(short_shares=(0.25, 0.5), short_promote=0.7,
-                                      promote=0.9, long_gap=0.5),
+        dict(CHOSEN, trust=1.5),
+    "same, > 2x (session 11, not taken: no better on the test takes)": dict(CHOSEN, trust=2.0),
+    "same, > 3x": dict(CHOSEN, trust=3.0),
+    "same, short gaps all the way below 0.4": dict(CHOSEN, short_whole=0.4),
+    "same, short gaps all the way below 0.5": dict(CHOSEN, short_whole=0.5),
+    "same, short < 1 s": dict(PART_WAY, long_gap=1.0),
+    "same, long promote 0.8": dict(PART_WAY, promote=0.8),
+    "same, long promote 1.0": dict(PART_WAY, promote=1.0),
+    "same, short promote 0.8": dict(PART_WAY, short_promote=0.8),
+    "same, short shares to 0.5": dict(PART_WAY, short_shares=(0.25, 0.5)),
 }
 
 
