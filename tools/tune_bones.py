@@ -50,8 +50,8 @@ SHARES = (0.25, 0.5, 0.75, 1.0)
 def main(out, names=CANDIDATES):
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    cache = out / "kb.npz"
     amc = bool(os.environ.get("MOCAP_GAPFILL_TUNE_AMC"))
+    cache = out / ("kb_amc.npz" if amc else "kb.npz")  # one OUTDIR may hold runs of both
     skip = 0 if amc else 6
     if cache.is_file():
         full = load_kb(cache)
