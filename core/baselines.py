@@ -178,7 +178,8 @@ def fill_rigid(pos, donors=RIGID_DONORS):
     return rigid_estimates(pos, donors)[0]
 
 
-def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cache=None):
+def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cache=None,
+                    reach=None):
     """:func:`fill_rigid` and, per sample it carried, the RMS spread (metres) of its donors'
     distances to it: near 0 where the point rides on a rigid segment with them (NaN elsewhere).
 
@@ -186,49 +187,96 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     positions (same shape, more of them seen) to choose the donors from, e.g. a take whose
     gaps are hidden further to test the fill. ``cache``: a dict kept between calls with the
     same ``partners``, so their statistics are computed once.
+
+    ``reach`` (frames): a second estimate is averaged in, from the steadiest donors seen at each
+    frame of the gap even where they are not seen at its ends, carried from the nearest frames
+    before and after the gap (at most ``reach`` times the gap's length away) where the point
+    and those donors are seen. With many points gone at once, the gap's ends often miss the
+    steadiest donors and the fill from the ends falls back to partners on other segments.
     """
     pos = np.asarray(pos, dtype=np.float64)
-    frames = len(pos)
     seen = np.isfinite(pos[..., 0])
     out = pos.copy()
     spreads = np.full(seen.shape, np.nan)
     stats = {} if cache is None else cache
     partners = pos if partners is None else np.asarray(partners, dtype=np.float64)
     for p, a, b in gap_runs(~seen):
-        ends = _gap_ends(a, b, frames)
-        if not ends:
-            continue
         if p not in stats:
             stats[p] = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
         spread = stats[p]
-        order = np.array([q for q in np.argsort(spread) if np.isfinite(spread[q])
-                          and seen[ends, q].all()], dtype=np.int64)
-        if len(order) < donors:
+        ends = _gap_ends(a, b, len(pos))
+        found = [_carry(pos, seen, p, a, b, spread, donors, weighted, ends)]
+        if reach:
+            found.append(_carry(pos, seen, p, a, b, spread, donors, weighted,
+                                int(reach * (b - a + 1))))
+        count = sum(np.isfinite(f[1]) for f in found)
+        if not count.any():
             continue
-        weights = _end_weights(a, b, ends)
-        ok = seen[a:b + 1][:, order]
-        # per frame, the steadiest donors seen there; frames sharing a donor set are fitted
-        # together
-        first = ok & (np.cumsum(ok, axis=1) <= donors)
-        full = first.sum(axis=1) == donors
-        sets, which = np.unique(first[full], axis=0, return_inverse=True)
-        for s, pick in enumerate(sets):
-            chosen, rows = order[pick], np.flatnonzero(full)[which.ravel() == s]
-            w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(donors)
-            w = (w / w.sum())[:, None]
-            cur = pos[a + rows][:, chosen]  # (t, donors, 3)
-            c_cur = (cur * w).sum(axis=1)
-            estimate = 0.0
-            for k, t in enumerate(ends):
-                ref = pos[t, chosen]
-                c_ref = (ref * w).sum(axis=0)
-                rot, _ = best_rotation(np.broadcast_to((ref - c_ref) * np.sqrt(w), cur.shape),
-                                       (cur - c_cur[:, None]) * np.sqrt(w))
-                moved = np.einsum("fij,j->fi", rot, pos[t, p] - c_ref) + c_cur
-                estimate = estimate + weights[rows, k:k + 1] * moved
-            out[a + rows, p] = estimate
-            spreads[a + rows, p] = np.sqrt(np.mean(spread[chosen] ** 2))
+        rows = count > 0
+        out[a:b + 1, p][rows] = (sum(np.nan_to_num(f[0]) for f in found)[rows]
+                                 / count[rows, None])
+        spreads[a:b + 1, p][rows] = np.sqrt(sum(np.nan_to_num(f[1]) ** 2 for f in found)
+                                            [rows] / count[rows])
     return fill_linear(out), spreads
+
+
+def _carry(pos, seen, p, a, b, spread, donors, weighted, refs):
+    """Rigid estimates of point ``p`` over its gap a..b and their donors' RMS spread (NaN where
+    none): per frame, the steadiest ``donors`` seen there, carried from the reference frames
+    ``refs`` (a list: the gap's ends, where the donors must be seen) or, given a number, from
+    the nearest frames within that many frames of the gap where ``p`` and the donors are seen;
+    estimates from references either side are blended linearly across the gap."""
+    estimate = np.full((b - a + 1, 3), np.nan)
+    rms = np.full(b - a + 1, np.nan)
+    order = np.flatnonzero(np.isfinite(spread))
+    order = order[np.argsort(spread[order], kind="stable")]
+    if isinstance(refs, list):
+        order = order[seen[refs][:, order].all(axis=0)]
+    else:  # donors seen with the point within reach on every side the take has
+        both = seen[:, order] & seen[:, p:p + 1]
+        sides = ([both[max(0, a - refs):a].any(axis=0)] if a > 0 else []) + \
+            ([both[b + 1:b + 1 + refs].any(axis=0)] if b + 1 < len(pos) else [])
+        order = order[np.all(sides, axis=0)] if sides else order[:0]
+    if len(order) < donors:
+        return estimate, rms
+    ok = seen[a:b + 1][:, order]
+    # per frame, the steadiest donors seen there; frames sharing a donor set are fitted
+    # together
+    first = ok & (np.cumsum(ok, axis=1) <= donors)
+    full = first.sum(axis=1) == donors
+    if not full.any():
+        return estimate, rms
+    sets, which = np.unique(first[full], axis=0, return_inverse=True)
+    for s, pick in enumerate(sets):
+        chosen, rows = order[pick], np.flatnonzero(full)[which.ravel() == s]
+        ends = refs if isinstance(refs, list) else _nearest_seen(
+            seen[:, p] & seen[:, chosen].all(axis=1), a, b, refs)
+        if not ends:
+            continue
+        w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(donors)
+        w = (w / w.sum())[:, None]
+        cur = pos[a + rows][:, chosen]  # (t, donors, 3)
+        c_cur = (cur * w).sum(axis=1)
+        weights = _end_weights(a, b, ends)[rows]
+        estimate[rows] = 0.0
+        for k, t in enumerate(ends):
+            ref = pos[t, chosen]
+            c_ref = (ref * w).sum(axis=0)
+            rot, _ = best_rotation(np.broadcast_to((ref - c_ref) * np.sqrt(w), cur.shape),
+                                   (cur - c_cur[:, None]) * np.sqrt(w))
+            moved = np.einsum("fij,j->fi", rot, pos[t, p] - c_ref) + c_cur
+            estimate[rows] += weights[:, k:k + 1] * moved
+        rms[rows] = np.sqrt(np.mean(spread[chosen] ** 2))
+    return estimate, rms
+
+
+def _nearest_seen(mask, a, b, reach):
+    """The last frame before ``a`` and the first after ``b`` where ``mask`` holds, within
+    ``reach`` frames of the gap (those that exist)."""
+    before = np.flatnonzero(mask[max(0, a - reach):a])
+    after = np.flatnonzero(mask[b + 1:b + 1 + reach])
+    return ([max(0, a - reach) + int(before[-1])] if len(before) else []) + \
+        ([b + 1 + int(after[0])] if len(after) else [])
 
 
 def fill_pattern(pos):

@@ -21,6 +21,12 @@ AUTO_DONORS = 3
 #: ``auto`` lets rigid partners alone carry a point whose copies they refill better than the
 #: knowledge base and within this RMS error (metres); the knowledge base then sees it as observed
 AUTO_RIGID_FIRST = 0.005
+#: for markers (not skeleton joints), ``auto``'s rigid-body estimate also carries a point from the
+#: nearest frames (within this many gap lengths) where its steadiest donors are seen, averaged
+#: with the estimate from the gap's ends. A skeleton's steadiest partners are often its
+#: neighbours along a bone chain (a bone's length is constant, the chain still bends), which
+#: frames further away carry wrong
+AUTO_REACH = 3
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
@@ -117,7 +123,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     base lacks) the one method that has them. Rigid partners win on points that ride on a
     segment (head, pelvis, a hand's fingers), the knowledge base where whole segments or long
     stretches are gone. The donors are chosen and weighted by how steady their distance to the
-    point is over the take (:func:`~.baselines.rigid_estimates`).
+    point is over the take (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate
+    also reaches past the gap's ends (:data:`AUTO_REACH`).
     """
     from .baselines import rigid_estimates
     from .recover import KnnSettings, fill_knn
@@ -129,10 +136,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     probe = validation_gaps(missing, AUTO_PROBES)
 
     partners = {}  # the donors' statistics on this take, computed once
+    reach = AUTO_REACH if motion.parents is None else None
 
     def carried(target):
         rigid, spread = rigid_estimates(target.positions, AUTO_DONORS, weighted=True,
-                                        partners=motion.positions, cache=partners)
+                                        partners=motion.positions, cache=partners,
+                                        reach=reach)
         return np.where(np.isnan(spread)[..., None], np.nan, rigid)
 
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point

@@ -100,6 +100,28 @@ def test_studio_fills_on_real_markers(data_dir):
     assert scores["rigid"] < scores["pattern"] < scores["spline"]
 
 
+def test_rigid_estimate_reaches_past_the_gap_ends_when_many_markers_are_gone(data_dir):
+    """CMU 02_05 with 30 % of its markers gone per half second (the `markers` protocol): the
+    steadiest donors are often missing at a gap's ends, so ``auto``'s rigid estimate also
+    carries the point from the nearest frames where they are seen; averaged with the estimate
+    from the ends it is much closer than the ends alone (48.9 -> 38.9 mm when written)."""
+    from mocap_gapfill.core.evaluate import punch_gaps
+    from mocap_gapfill.core.fill import AUTO_REACH
+
+    take = read_motion(data_dir / "cmu/c3d/02_05.c3d")
+    take = take.select([n for n in take.names if n != "RSHN"])  # its one real gap
+    take = take.frame_range(0, 900)
+    assert not take.missing.any()
+    miss = punch_gaps(take.n_frames, take.n_points, "markers", 0.3, np.random.default_rng(0))
+    gappy = with_gaps(take, miss).positions
+    scores = {reach: rmse_mm(take.replace(positions=baselines.rigid_estimates(
+        gappy, weighted=True, reach=reach)[0]), take, miss) for reach in (None, AUTO_REACH)}
+    print(scores)
+    assert scores[AUTO_REACH] < 0.85 * scores[None]
+    np.testing.assert_array_equal(
+        baselines.rigid_estimates(gappy, reach=AUTO_REACH)[0][~miss], gappy[~miss])
+
+
 @pytest.mark.parametrize("frames", [60, 180])
 def test_copies_of_long_gaps_fit_short_takes(frames):
     """A gap too long for a full-length copy gets a shorter one rather than none."""
