@@ -34,6 +34,8 @@ from .posing import best_rotation
 
 #: donors of a rigid-body fill
 RIGID_DONORS = 3
+#: metres added (in quadrature) to the donors' spread when two rigid estimates are weighed
+SPREAD_FLOOR = 0.005
 
 
 def fill_linear(pos):
@@ -188,10 +190,11 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     gaps are hidden further to test the fill. ``cache``: a dict kept between calls with the
     same ``partners``, so their statistics are computed once.
 
-    ``reach`` (frames): a second estimate is averaged in, from the steadiest donors seen at each
-    frame of the gap even where they are not seen at its ends, carried from the nearest frames
-    before and after the gap (at most ``reach`` times the gap's length away) where the point
-    and those donors are seen. With many points gone at once, the gap's ends often miss the
+    ``reach``: a second estimate is averaged in, from the steadiest donors seen at each frame of
+    the gap even where they are not seen at its ends, carried from the nearest frames before and
+    after the gap (at most ``reach`` times the gap's length away) where the point and those
+    donors are seen; the two are weighted by the inverse of their donors' squared spread plus
+    :data:`SPREAD_FLOOR` squared. With many points gone at once, the gap's ends often miss the
     steadiest donors and the fill from the ends falls back to partners on other segments.
     """
     pos = np.asarray(pos, dtype=np.float64)
@@ -205,18 +208,13 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
             stats[p] = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
         spread = stats[p]
         ends = _gap_ends(a, b, len(pos))
-        found = [_carry(pos, seen, p, a, b, spread, donors, weighted, ends)]
+        estimate, rms = _carry(pos, seen, p, a, b, spread, donors, weighted, ends)
         if reach:
-            found.append(_carry(pos, seen, p, a, b, spread, donors, weighted,
-                                int(reach * (b - a + 1))))
-        count = sum(np.isfinite(f[1]) for f in found)
-        if not count.any():
-            continue
-        rows = count > 0
-        out[a:b + 1, p][rows] = (sum(np.nan_to_num(f[0]) for f in found)[rows]
-                                 / count[rows, None])
-        spreads[a:b + 1, p][rows] = np.sqrt(sum(np.nan_to_num(f[1]) ** 2 for f in found)
-                                            [rows] / count[rows])
+            estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, a, b, spread, donors,
+                                                            weighted, int(reach * (b - a + 1)))])
+        rows = np.isfinite(rms)
+        out[a:b + 1, p][rows] = estimate[rows]
+        spreads[a:b + 1, p][rows] = rms[rows]
     return fill_linear(out), spreads
 
 
@@ -229,13 +227,13 @@ def _carry(pos, seen, p, a, b, spread, donors, weighted, refs):
     estimate = np.full((b - a + 1, 3), np.nan)
     rms = np.full(b - a + 1, np.nan)
     order = np.flatnonzero(np.isfinite(spread))
-    order = order[np.argsort(spread[order], kind="stable")]
+    order = order[np.argsort(spread[order], kind="stable")]  # steadiest first
     if isinstance(refs, list):
         order = order[seen[refs][:, order].all(axis=0)]
     else:  # donors seen with the point within reach on every side the take has
-        both = seen[:, order] & seen[:, p:p + 1]
-        sides = ([both[max(0, a - refs):a].any(axis=0)] if a > 0 else []) + \
-            ([both[b + 1:b + 1 + refs].any(axis=0)] if b + 1 < len(pos) else [])
+        sides = [(seen[lo:hi, order] & seen[lo:hi, p:p + 1]).any(axis=0)
+                 for lo, hi in ((max(0, a - refs), a), (b + 1, b + 1 + refs)) if hi > lo
+                 and lo < len(pos)]
         order = order[np.all(sides, axis=0)] if sides else order[:0]
     if len(order) < donors:
         return estimate, rms
@@ -249,8 +247,8 @@ def _carry(pos, seen, p, a, b, spread, donors, weighted, refs):
     sets, which = np.unique(first[full], axis=0, return_inverse=True)
     for s, pick in enumerate(sets):
         chosen, rows = order[pick], np.flatnonzero(full)[which.ravel() == s]
-        ends = refs if isinstance(refs, list) else _nearest_seen(
-            seen[:, p] & seen[:, chosen].all(axis=1), a, b, refs)
+        ends = refs if isinstance(refs, list) else _nearest_seen(seen, [p, *chosen], a, b,
+                                                                 refs)
         if not ends:
             continue
         w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(donors)
@@ -270,12 +268,27 @@ def _carry(pos, seen, p, a, b, spread, donors, weighted, refs):
     return estimate, rms
 
 
-def _nearest_seen(mask, a, b, reach):
-    """The last frame before ``a`` and the first after ``b`` where ``mask`` holds, within
-    ``reach`` frames of the gap (those that exist)."""
-    before = np.flatnonzero(mask[max(0, a - reach):a])
-    after = np.flatnonzero(mask[b + 1:b + 1 + reach])
-    return ([max(0, a - reach) + int(before[-1])] if len(before) else []) + \
+def _weigh(found):
+    """Rigid estimates ``(estimate, rms)`` of the same frames averaged with the inverse of their
+    donors' squared spread (plus :data:`SPREAD_FLOOR` squared, the error that the donors'
+    steadiness does not show) as weights; NaN where none has an estimate."""
+    weights = [np.where(np.isfinite(rms), 1 / (np.nan_to_num(rms) ** 2 + SPREAD_FLOOR ** 2), 0.0)
+               for _, rms in found]
+    total = sum(weights)
+    with np.errstate(invalid="ignore"):
+        estimate = sum(w[:, None] * np.nan_to_num(e) for w, (e, _) in zip(weights, found)) \
+            / total[:, None]
+        rms = np.sqrt(sum(w * np.nan_to_num(r) ** 2 for w, (_, r) in zip(weights, found)) / total)
+    return estimate, rms
+
+
+def _nearest_seen(seen, points, a, b, reach):
+    """The last frame before ``a`` and the first after ``b`` where all ``points`` are seen,
+    within ``reach`` frames of the gap (those that exist)."""
+    lo = max(0, a - reach)
+    before = np.flatnonzero(seen[lo:a, points].all(axis=1))
+    after = np.flatnonzero(seen[b + 1:b + 1 + reach, points].all(axis=1))
+    return ([lo + int(before[-1])] if len(before) else []) + \
         ([b + 1 + int(after[0])] if len(after) else [])
 
 

@@ -22,7 +22,7 @@ AUTO_DONORS = 3
 #: knowledge base and within this RMS error (metres); the knowledge base then sees it as observed
 AUTO_RIGID_FIRST = 0.005
 #: for markers (not skeleton joints), ``auto``'s rigid-body estimate also carries a point from the
-#: nearest frames (within this many gap lengths) where its steadiest donors are seen, averaged
+#: nearest frames (within this many gap lengths) where its steadiest donors are seen, weighed
 #: with the estimate from the gap's ends. A skeleton's steadiest partners are often its
 #: neighbours along a bone chain (a bone's length is constant, the chain still bends), which
 #: frames further away carry wrong

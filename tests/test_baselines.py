@@ -103,8 +103,8 @@ def test_studio_fills_on_real_markers(data_dir):
 def test_rigid_estimate_reaches_past_the_gap_ends_when_many_markers_are_gone(data_dir):
     """CMU 02_05 with 30 % of its markers gone per half second (the `markers` protocol): the
     steadiest donors are often missing at a gap's ends, so ``auto``'s rigid estimate also
-    carries the point from the nearest frames where they are seen; averaged with the estimate
-    from the ends it is much closer than the ends alone (48.9 -> 38.9 mm when written)."""
+    carries the point from the nearest frames where they are seen; weighed with the estimate
+    from the ends it is much closer than the ends alone (48.9 -> 38.0 mm when written)."""
     from mocap_gapfill.core.evaluate import punch_gaps
     from mocap_gapfill.core.fill import AUTO_REACH
 
