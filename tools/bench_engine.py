@@ -6,6 +6,9 @@
 2. Fill (knn, and the default auto) of a 2,048-frame clip (6 joints missing in every 120-frame interval) against a knowledge
    base of all Daz-friendly BVH motion (120 fps, the test take 13_30 left out): seconds and peak
    memory (max RSS of a fresh process for the stage).
+3. Markers: ``auto`` on the first 2,048 frames of CMU 135_02 (C3D, 41 markers, 30 % of them gone
+   per 60 frames) against the other CMU C3D takes, with its rigid estimate reaching past the gap
+   ends (the default) and from the ends only (session 7), in the same process.
 
 Usage: OMP_NUM_THREADS=2 .venv/bin/python tools/bench_engine.py [--repeat 3] [--json OUT]
 [--device auto|numpy|cpu|cuda] [--skip-search]
@@ -90,6 +93,31 @@ def stage_fill(repeat, k=None, device="auto", method="knn"):
             "rmse_missing_mm": rmse_mm(out, take, miss)}
 
 
+def stage_markers(repeat):
+    import numpy as np
+
+    from mocap_gapfill.core import fill as fills
+    from mocap_gapfill.core.evaluate import punch_gaps, rmse_mm, with_gaps
+    from mocap_gapfill.core.io import read_motion
+    from mocap_gapfill.core.kb import build_kb
+
+    kb = build_kb([DATA / "cmu/c3d"], fps=120.0, exclude=["*135_02*"])
+    take = read_motion(DATA / "cmu/c3d/135_02.c3d").frame_range(0, 2048)
+    take = take.select([n for n in take.names if n in kb.names])
+    miss = punch_gaps(2048, take.n_points, "markers", 0.3, np.random.default_rng(0))
+    query = with_gaps(take, miss)
+    result = {"frames": 2048, "points": take.n_points, "kb_size": kb.size}
+    for label, reach in (("ends", None), ("reach", fills.AUTO_REACH)) * repeat:
+        fills.AUTO_REACH = reach
+        t = time.perf_counter()
+        out = fills.fill(query, "auto", kb=kb)
+        result.setdefault(f"{label}_s", []).append(time.perf_counter() - t)
+        result[f"{label}_rmse_missing_mm"] = rmse_mm(out, take, miss)
+    for label in ("ends", "reach"):
+        result[f"{label}_median_s"] = statistics.median(result.pop(f"{label}_s"))
+    return result
+
+
 def run_stage(name, repeat, device="auto"):
     """Run one stage in a fresh interpreter; its result plus that process's peak RSS."""
     proc = subprocess.run([sys.executable, __file__, "--stage", name, "--repeat", str(repeat),
@@ -103,7 +131,7 @@ def main():
     choose_blas_kernel()  # as the command line does; the stages inherit it
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--stage", choices=["search", "fill", "fill256", "auto"])
+    parser.add_argument("--stage", choices=["search", "fill", "fill256", "auto", "markers"])
     parser.add_argument("--json")
     parser.add_argument("--device", default="auto", help="the fill's (auto, numpy, cpu, cuda)")
     parser.add_argument("--skip-search", action="store_true")
@@ -113,6 +141,7 @@ def main():
                   "fill": lambda r: stage_fill(r, device=args.device),
                   "fill256": lambda r: stage_fill(r, k=256, device=args.device),
                   "auto": lambda r: stage_fill(r, device=args.device, method="auto"),
+                  "markers": stage_markers,
                   }[args.stage](args.repeat)
         result["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         print(json.dumps(result))
@@ -138,9 +167,17 @@ def main():
     for fill in fills:
         print(f"  {fill['method']} fill ({fill['device']}), K {fill['k']!s:14s} median {fill['fill_median_s']:6.2f} s, "
               f"peak RSS {fill['peak_rss_mb']:.0f} MB, RMSE missing {fill['rmse_missing_mm']:.1f} mm")
+    markers = run_stage("markers", args.repeat)
+    print(f"markers: auto on {markers['frames']} frames of 135_02, {markers['points']} markers, 30 % "
+          f"gone per 60 frames, KB {markers['kb_size']} poses")
+    for label, what in (("ends", "rigid estimate from the gap ends"),
+                        ("reach", "... and past them (default)")):
+        print(f"  {what:34s} median {markers[label + '_median_s']:6.2f} s, RMSE missing "
+              f"{markers[label + '_rmse_missing_mm']:.1f} mm")
+    print(f"  ratio {markers['reach_median_s'] / markers['ends_median_s']:.2f}")
     if args.json:
         Path(args.json).write_text(json.dumps({"machine": machine, "search": search,
-                                               "fill": fills}, indent=1))
+                                               "fill": fills, "markers": markers}, indent=1))
 
 
 if __name__ == "__main__":
