@@ -19,8 +19,11 @@ AUTO_PROBES = 3
 #: donors of ``auto``'s rigid-body estimate
 AUTO_DONORS = 3
 #: ``auto`` lets rigid partners alone carry a point whose copies they refill better than the
-#: knowledge base and within this RMS error (metres); the knowledge base then sees it as observed
+#: knowledge base and within this RMS error (metres); the knowledge base then sees it as observed.
+#: Skeleton joints ride on exactly rigid bones; skin markers shift against each other by
+#: millimetres, so a marker set allows more
 AUTO_RIGID_FIRST = 0.005
+AUTO_RIGID_FIRST_MARKERS = 0.02
 #: for markers (not skeleton joints), ``auto``'s rigid-body estimate also carries a point from the
 #: nearest frames (within this many gap lengths) where its steadiest donors are seen, weighed
 #: with the estimate from the gap's ends. A skeleton's steadiest partners are often its
@@ -117,10 +120,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     nearby frames where its point is observed; both fill those copies, and a point's gaps take
     ``w * knn + (1 - w) * rigid`` with ``w = e_rigid / (e_knn + e_rigid)`` (``e``: mean squared
     error on the point's copies: inverse-variance weights). Rigid partners go first: a point
-    they refill better than the knowledge base and within :data:`AUTO_RIGID_FIRST` is theirs
-    alone, and the knowledge base's fill of the others sees it as observed. Points without
-    copies keep the knowledge base's fill; samples with no rigid donors (or points the knowledge
-    base lacks) the one method that has them. Rigid partners win on points that ride on a
+    they refill better than the knowledge base and within :data:`AUTO_RIGID_FIRST` (markers:
+    :data:`AUTO_RIGID_FIRST_MARKERS`) is theirs alone, and the knowledge base's fill of the
+    others sees it as observed. Points without copies keep the knowledge base's fill; samples
+    with no rigid donors (or points the knowledge base lacks) the one method that has them. Rigid partners win on points that ride on a
     segment (head, pelvis, a hand's fingers), the knowledge base where whole segments or long
     stretches are gone. The donors are chosen and weighted by how steady their distance to the
     point is over the take (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate
@@ -136,7 +139,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     probe = validation_gaps(missing, AUTO_PROBES)
 
     partners = {}  # the donors' statistics on this take, computed once
-    reach = AUTO_REACH if motion.parents is None else None
+    markers = motion.parents is None
+    reach = AUTO_REACH if markers else None
 
     def carried(target):
         rigid, spread = rigid_estimates(target.positions, AUTO_DONORS, weighted=True,
@@ -159,7 +163,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
                                 np.isfinite(e_knn[seen]).astype(float))
         # points their rigid partners carry alone
-        first = seen & (e_rigid < e_knn) & (e_rigid < AUTO_RIGID_FIRST ** 2 * probe.sum(axis=0))
+        alone = AUTO_RIGID_FIRST_MARKERS if markers else AUTO_RIGID_FIRST
+        first = seen & (e_rigid < e_knn) & (e_rigid < alone ** 2 * probe.sum(axis=0))
         weight[first] = 0.0
     rigid = carried(motion)
     ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
