@@ -190,7 +190,7 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     gaps are hidden further to test the fill. ``cache``: a dict kept between calls with the
     same ``partners``, so their statistics are computed once.
 
-    ``reach``: a second estimate is averaged in, from the steadiest donors seen at each frame of
+    ``reach``: a second estimate is weighed in, from the steadiest donors seen at each frame of
     the gap even where they are not seen at its ends, carried from the nearest frames before and
     after the gap (at most ``reach`` times the gap's length away) where the point and those
     donors are seen; the two are weighted by the inverse of their donors' squared spread plus

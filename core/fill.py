@@ -123,11 +123,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     they refill better than the knowledge base and within :data:`AUTO_RIGID_FIRST` (markers:
     :data:`AUTO_RIGID_FIRST_MARKERS`) is theirs alone, and the knowledge base's fill of the
     others sees it as observed. Points without copies keep the knowledge base's fill; samples
-    with no rigid donors (or points the knowledge base lacks) the one method that has them. Rigid partners win on points that ride on a
-    segment (head, pelvis, a hand's fingers), the knowledge base where whole segments or long
-    stretches are gone. The donors are chosen and weighted by how steady their distance to the
-    point is over the take (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate
-    also reaches past the gap's ends (:data:`AUTO_REACH`).
+    with no rigid donors (or points the knowledge base lacks) the one method that has them.
+    Rigid partners win on points that ride on a segment (head, pelvis, a hand's fingers), the
+    knowledge base where whole segments or long stretches are gone. The donors are chosen and
+    weighted by how steady their distance to the point is over the take
+    (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate also reaches past the
+    gap's ends (:data:`AUTO_REACH`).
     """
     from .baselines import rigid_estimates
     from .recover import KnnSettings, fill_knn
