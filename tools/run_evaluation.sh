@@ -26,6 +26,11 @@ $MG evaluate --protocol realgaps --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
 # HDM05-derived numbers (CC BY-SA 3.0 data in the knowledge base)
 $MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
   --test "$D/cmu/c3d/85_02.c3d" --json docs/results/markers_hdm05_kb.json
+# other subjects of another lab: each HDM05 take against a KB of the other two (markers)
+$MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
+  --methods auto rigid pattern local-spline spline linear \
+  --test "$D"/hdm05/c3d/HDM_bd_05-01_01_120.c3d "$D"/hdm05/c3d/HDM_dg_06-03_03_120.c3d \
+         "$D"/hdm05/c3d/HDM_mm_01-02_03_120.c3d --json docs/results/markers_hdm05_subjects.json
 $MG evaluate --protocol bodyparts --quiet --skip-frames 6 --kb-sources "$DAZ" \
   --test "$DAZ"/05/05_02.bvh.gz "$DAZ"/13/13_30.bvh.gz "$DAZ"/09/09_12.bvh.gz \
   --json docs/results/bodyparts_bvh43.json
