@@ -33,10 +33,14 @@ def test_rigid_fill_is_exact_on_a_rigid_body_and_ignores_loose_points():
     gappy[50:120, 2] = np.nan  # inside the take
     gappy[170:, 4] = np.nan  # to the clip end: carried from one side only
     gappy[60:80, 0] = np.nan  # a donor gone for part of the gap: others stand in
-    out = baselines.fill_rigid(gappy)
-    np.testing.assert_allclose(out[50:120, 2], pos[50:120, 2], atol=1e-9)
-    np.testing.assert_allclose(out[170:, 4], pos[170:, 4], atol=1e-9)
-    np.testing.assert_array_equal(out[~np.isnan(gappy)], gappy[~np.isnan(gappy)])
+    gappy[110:130, 1] = np.nan  # a donor gone at the gap's end: auto's estimate reaches past it
+    for reach in (None, 3):
+        out = baselines.rigid_estimates(gappy, weighted=reach is not None, reach=reach)[0]
+        np.testing.assert_allclose(out[50:120, 2], pos[50:120, 2], atol=1e-9)
+        np.testing.assert_allclose(out[170:, 4], pos[170:, 4], atol=1e-9)
+        np.testing.assert_array_equal(out[~np.isnan(gappy)], gappy[~np.isnan(gappy)])
+    np.testing.assert_array_equal(baselines.fill_rigid(gappy),
+                                  baselines.rigid_estimates(gappy)[0])
     # the loose point is never a donor: its distance to the body varies
     _, spread = baselines.rigid_estimates(gappy)
     assert np.nanmax(spread) < 1e-9
