@@ -7,8 +7,9 @@
    base of all Daz-friendly BVH motion (120 fps, the test take 13_30 left out): seconds and peak
    memory (max RSS of a fresh process for the stage).
 3. Markers: ``auto`` on the first 2,048 frames of CMU 135_02 (C3D, 41 markers, 30 % of them gone
-   per 60 frames) against the other CMU C3D takes, with its rigid estimate reaching past the gap
-   ends (the default) and from the ends only (session 7), in the same process.
+   per 60 frames) against the other CMU C3D takes, with the default marker settings (session 12: the
+   rigid estimate reaching past the gap ends, partners alone within 20 mm) and session 7's (from
+   the ends only, within 5 mm), in the same process.
 
 Usage: OMP_NUM_THREADS=2 .venv/bin/python tools/bench_engine.py [--repeat 3] [--json OUT]
 [--device auto|numpy|cpu|cuda] [--skip-search]
@@ -107,8 +108,10 @@ def stage_markers(repeat):
     miss = punch_gaps(2048, take.n_points, "markers", 0.3, np.random.default_rng(0))
     query = with_gaps(take, miss)
     result = {"frames": 2048, "points": take.n_points, "kb_size": kb.size}
-    for label, reach in (("ends", None), ("reach", fills.AUTO_REACH)) * repeat:
-        fills.AUTO_REACH = reach
+    now = fills.AUTO_REACH, fills.AUTO_RIGID_FIRST_MARKERS
+    then = None, fills.AUTO_RIGID_FIRST  # session 7: from the gap ends, partners alone within 5 mm
+    for label, (reach, alone) in (("ends", then), ("reach", now)) * repeat:
+        fills.AUTO_REACH, fills.AUTO_RIGID_FIRST_MARKERS = reach, alone
         t = time.perf_counter()
         out = fills.fill(query, "auto", kb=kb)
         result.setdefault(f"{label}_s", []).append(time.perf_counter() - t)
@@ -168,10 +171,10 @@ def main():
         print(f"  {fill['method']} fill ({fill['device']}), K {fill['k']!s:14s} median {fill['fill_median_s']:6.2f} s, "
               f"peak RSS {fill['peak_rss_mb']:.0f} MB, RMSE missing {fill['rmse_missing_mm']:.1f} mm")
     markers = run_stage("markers", args.repeat)
-    print(f"markers: auto on {markers['frames']} frames of 135_02, {markers['points']} markers, 30 % "
-          f"gone per 60 frames, KB {markers['kb_size']} poses")
-    for label, what in (("ends", "rigid estimate from the gap ends"),
-                        ("reach", "... and past them (default)")):
+    print(f"markers: auto on {markers['frames']} frames of 135_02, {markers['points']} markers, "
+          f"30 % gone per 60 frames, KB {markers['kb_size']} poses")
+    for label, what in (("ends", "session 7 (rigid from the gap ends)"),
+                        ("reach", "default (rigid past the ends)")):
         print(f"  {what:34s} median {markers[label + '_median_s']:6.2f} s, RMSE missing "
               f"{markers[label + '_rmse_missing_mm']:.1f} mm")
     print(f"  ratio {markers['reach_median_s'] / markers['ends_median_s']:.2f}")
