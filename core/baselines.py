@@ -207,8 +207,7 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
         if p not in stats:
             stats[p] = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
         spread = stats[p]
-        ends = _gap_ends(a, b, len(pos))
-        estimate, rms = _carry(pos, seen, p, a, b, spread, donors, weighted, ends)
+        estimate, rms = _carry(pos, seen, p, a, b, spread, donors, weighted)
         if reach:
             estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, a, b, spread, donors,
                                                             weighted, int(reach * (b - a + 1)))])
@@ -218,21 +217,22 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     return fill_linear(out), spreads
 
 
-def _carry(pos, seen, p, a, b, spread, donors, weighted, refs):
+def _carry(pos, seen, p, a, b, spread, donors, weighted, reach=None):
     """Rigid estimates of point ``p`` over its gap a..b and their donors' RMS spread (NaN where
-    none): per frame, the steadiest ``donors`` seen there, carried from the reference frames
-    ``refs`` (a list: the gap's ends, where the donors must be seen) or, given a number, from
-    the nearest frames within that many frames of the gap where ``p`` and the donors are seen;
-    estimates from references either side are blended linearly across the gap."""
+    none): per frame, the steadiest ``donors`` seen there, carried from the gap's ends (where
+    the donors must be seen) or, given ``reach``, from the nearest frames within that many
+    frames of the gap where ``p`` and the donors are seen; estimates from references either
+    side are blended linearly across the gap."""
     estimate = np.full((b - a + 1, 3), np.nan)
     rms = np.full(b - a + 1, np.nan)
     order = np.flatnonzero(np.isfinite(spread))
     order = order[np.argsort(spread[order], kind="stable")]  # steadiest first
-    if isinstance(refs, list):
-        order = order[seen[refs][:, order].all(axis=0)]
+    if reach is None:
+        ends = _gap_ends(a, b, len(pos))
+        order = order[seen[ends][:, order].all(axis=0)]
     else:  # donors seen with the point within reach on every side the take has
         sides = [(seen[lo:hi, order] & seen[lo:hi, p:p + 1]).any(axis=0)
-                 for lo, hi in ((max(0, a - refs), a), (b + 1, b + 1 + refs)) if hi > lo
+                 for lo, hi in ((max(0, a - reach), a), (b + 1, b + 1 + reach)) if hi > lo
                  and lo < len(pos)]
         order = order[np.all(sides, axis=0)] if sides else order[:0]
     if len(order) < donors:
@@ -247,8 +247,8 @@ def _carry(pos, seen, p, a, b, spread, donors, weighted, refs):
     sets, which = np.unique(first[full], axis=0, return_inverse=True)
     for s, pick in enumerate(sets):
         chosen, rows = order[pick], np.flatnonzero(full)[which.ravel() == s]
-        ends = refs if isinstance(refs, list) else _nearest_seen(seen, [p, *chosen], a, b,
-                                                                 refs)
+        if reach is not None:
+            ends = _nearest_seen(seen, [p, *chosen], a, b, reach)
         if not ends:
             continue
         w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(donors)
