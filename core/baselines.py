@@ -204,12 +204,13 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     stats = {} if cache is None else cache
     partners = pos if partners is None else np.asarray(partners, dtype=np.float64)
     for p, a, b in gap_runs(~seen):
-        if p not in stats:
-            stats[p] = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
-        spread = stats[p]
-        estimate, rms = _carry(pos, seen, p, a, b, spread, donors, weighted)
+        if p not in stats:  # the partners' spread, and the partners steadiest first
+            spread = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
+            order = np.flatnonzero(np.isfinite(spread))
+            stats[p] = spread, order[np.argsort(spread[order], kind="stable")]
+        estimate, rms = _carry(pos, seen, p, a, b, stats[p], donors, weighted)
         if reach:
-            estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, a, b, spread, donors,
+            estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, a, b, stats[p], donors,
                                                             weighted, int(reach * (b - a + 1)))])
         rows = np.isfinite(rms)
         out[a:b + 1, p][rows] = estimate[rows]
@@ -217,16 +218,16 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     return fill_linear(out), spreads
 
 
-def _carry(pos, seen, p, a, b, spread, donors, weighted, reach=None):
+def _carry(pos, seen, p, a, b, steady, donors, weighted, reach=None):
     """Rigid estimates of point ``p`` over its gap a..b and their donors' RMS spread (NaN where
-    none): per frame, the steadiest ``donors`` seen there, carried from the gap's ends (where
-    the donors must be seen) or, given ``reach``, from the nearest frames within that many
-    frames of the gap where ``p`` and the donors are seen; estimates from references either
-    side are blended linearly across the gap."""
+    none). ``steady``: every point's spread against ``p`` and the points in order of it (the
+    steadiest first). Per frame, the steadiest ``donors`` seen there, carried from the gap's
+    ends (where the donors must be seen) or, given ``reach``, from the nearest frames within
+    that many frames of the gap where ``p`` and the donors are seen; estimates from references
+    either side are blended linearly across the gap."""
     estimate = np.full((b - a + 1, 3), np.nan)
     rms = np.full(b - a + 1, np.nan)
-    order = np.flatnonzero(np.isfinite(spread))
-    order = order[np.argsort(spread[order], kind="stable")]  # steadiest first
+    spread, order = steady
     if reach is None:
         ends = _gap_ends(a, b, len(pos))
         order = order[seen[ends][:, order].all(axis=0)]

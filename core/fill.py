@@ -140,8 +140,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     probe = validation_gaps(missing, AUTO_PROBES)
 
     partners = {}  # the donors' statistics on this take, computed once
-    markers = motion.parents is None
-    reach = AUTO_REACH if markers else None
+    # marker sets reach past the gap ends and let partners carry a marker alone within more
+    reach, alone = ((AUTO_REACH, AUTO_RIGID_FIRST_MARKERS) if motion.parents is None
+                    else (None, AUTO_RIGID_FIRST))
 
     def carried(target):
         rigid, spread = rigid_estimates(target.positions, AUTO_DONORS, weighted=True,
@@ -164,7 +165,6 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
                                 np.isfinite(e_knn[seen]).astype(float))
         # points their rigid partners carry alone
-        alone = AUTO_RIGID_FIRST_MARKERS if markers else AUTO_RIGID_FIRST
         first = seen & (e_rigid < e_knn) & (e_rigid < alone ** 2 * probe.sum(axis=0))
         weight[first] = 0.0
     rigid = carried(motion)
