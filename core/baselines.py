@@ -245,27 +245,41 @@ def _carry(pos, seen, p, a, b, steady, donors, weighted, reach=None):
     full = first.sum(axis=1) == donors
     if not full.any():
         return estimate, rms
-    sets, which = np.unique(first[full], axis=0, return_inverse=True)
-    for s, pick in enumerate(sets):
-        chosen, rows = order[pick], np.flatnonzero(full)[which.ravel() == s]
-        if reach is not None:
-            ends = _nearest_seen(seen, [p, *chosen], a, b, reach)
-        if not ends:
+    rows = np.flatnonzero(full)
+    # each frame's donor set as one number (the donors' places in ``order``)
+    places = np.nonzero(first[full])[1].reshape(-1, donors)
+    key = np.ravel_multi_index(places.T, (len(order),) * donors)
+    _, sets, which = np.unique(key, return_index=True, return_inverse=True)
+    chosen = order[places[sets]]  # (sets, donors)
+    if reach is None:
+        refs = [ends] * len(sets)
+    else:
+        refs = [_nearest_seen(seen, [p, *c], a, b, reach) for c in chosen]
+    w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(chosen.shape)
+    w /= w.sum(axis=1, keepdims=True)
+    has = np.array([bool(r) for r in refs])[which]
+    rows, which = rows[has], which[has]
+    if not len(rows):
+        return estimate, rms
+    cw = w[which][..., None]  # (t, donors, 1)
+    cur = pos[a + rows[:, None], chosen[which]]  # (t, donors, 3)
+    c_cur = (cur * cw).sum(axis=1)
+    estimate[rows] = 0.0
+    for k in range(2):  # each frame's first reference (before the gap where there is one), then its second
+        ref_t = np.array([r[k] if len(r) > k else -1 for r in refs])[which]
+        use = ref_t >= 0
+        if not use.any():
             continue
-        w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(donors)
-        w = (w / w.sum())[:, None]
-        cur = pos[a + rows][:, chosen]  # (t, donors, 3)
-        c_cur = (cur * w).sum(axis=1)
-        weights = _end_weights(a, b, ends)[rows]
-        estimate[rows] = 0.0
-        for k, t in enumerate(ends):
-            ref = pos[t, chosen]
-            c_ref = (ref * w).sum(axis=0)
-            rot, _ = best_rotation(np.broadcast_to((ref - c_ref) * np.sqrt(w), cur.shape),
-                                   (cur - c_cur[:, None]) * np.sqrt(w))
-            moved = np.einsum("fij,j->fi", rot, pos[t, p] - c_ref) + c_cur
-            estimate[rows] += weights[:, k:k + 1] * moved
-        rms[rows] = np.sqrt(np.mean(spread[chosen] ** 2))
+        weight = np.array([_end_weights(a, b, r)[:, k] if len(r) > k else np.zeros(b - a + 1)
+                           for r in refs])[which, rows]
+        t, r_rows = ref_t[use], rows[use]
+        ref = pos[t[:, None], chosen[which[use]]]  # (t, donors, 3)
+        c_ref = (ref * cw[use]).sum(axis=1)
+        rot, _ = best_rotation((ref - c_ref[:, None]) * np.sqrt(cw[use]),
+                               (cur[use] - c_cur[use][:, None]) * np.sqrt(cw[use]))
+        moved = np.einsum("fij,fj->fi", rot, pos[t, p] - c_ref) + c_cur[use]
+        estimate[r_rows] += weight[use][:, None] * moved
+    rms[rows] = np.sqrt(np.mean(spread[chosen[which]] ** 2, axis=1))
     return estimate, rms
 
 
