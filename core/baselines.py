@@ -265,7 +265,7 @@ def _carry(pos, seen, p, a, b, steady, donors, weighted, reach=None):
     cur = pos[a + rows[:, None], chosen[which]]  # (t, donors, 3)
     c_cur = (cur * cw).sum(axis=1)
     estimate[rows] = 0.0
-    for k in range(2):  # each frame's first reference (before the gap where there is one), then its second
+    for k in range(2):  # each frame's first reference (before the gap if any), then its second
         ref_t = np.array([r[k] if len(r) > k else -1 for r in refs])[which]
         use = ref_t >= 0
         if not use.any():
