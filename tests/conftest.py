@@ -27,6 +27,16 @@ def data_dir():
     return DATA
 
 
+@pytest.fixture(scope="session")
+def daz_rotation_kb(data_dir):
+    """Every Daz-friendly BVH take as a knowledge base with bone rotations, every 4th frame (30
+    poses a second); a test takes its own subject out (``evaluate.kb_without``). Built once per
+    session: reading every take is the slow part."""
+    from mocap_gapfill.core.kb import build_kb
+
+    return build_kb([data_dir / "cmu/bvh/daz_friendly"], fps=120, skip_frames=6, stride=4)
+
+
 _EXIT = {}
 
 

@@ -9,6 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from mocap_gapfill.core.bonefill import carry_subtrees, fill_bones, gap_copies
 from mocap_gapfill.core.errors import GapFillError, ParseError
+from mocap_gapfill.core.evaluate import kb_without
 from mocap_gapfill.core.formats.asfamc import parse_asf
 from mocap_gapfill.core.formats.bvh import read_bvh_rig
 from mocap_gapfill.core.io import read_motion, read_rig_take
@@ -27,10 +28,9 @@ def walk(data_dir):
 
 
 @pytest.fixture(scope="module")
-def daz_kb(data_dir):
-    """Every Daz-friendly subject but 07 (the walk's), every 2nd pose at 60 fps."""
-    return build_kb([data_dir / "cmu/bvh/daz_friendly"], exclude=["*/07/*"], fps=60,
-                    skip_frames=6, stride=2)
+def daz_kb(daz_rotation_kb):
+    """Every Daz-friendly subject but 07 (the walk's), 30 poses a second."""
+    return kb_without(daz_rotation_kb, "07")
 
 
 @pytest.mark.parametrize("path", [WALK, "cmu/asfamc/07/07_05.amc"])

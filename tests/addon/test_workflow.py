@@ -56,12 +56,11 @@ def marker_kb(data_dir, tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def daz_kb(data_dir, tmp_path_factory):
-    from mocap_gapfill.core.kb import build_kb
+def daz_kb(daz_rotation_kb, tmp_path_factory):
+    from mocap_gapfill.core.evaluate import kb_without
 
     path = tmp_path_factory.mktemp("kb") / "daz.npz"
-    build_kb([data_dir / "cmu/bvh/daz_friendly"], exclude=["*/03/*"], fps=120, skip_frames=6,
-             stride=4).save(path)
+    kb_without(daz_rotation_kb, "03").save(path)
     return path
 
 
