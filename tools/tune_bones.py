@@ -6,7 +6,8 @@ and setting (squared joint errors per gap and per copy, per candidate, and each 
 deviation from ``interp``, ``*_dev``) for the selection rules
 to be compared offline (docs/METHOD_NOTES.md). Where ``match`` and ``hermite`` are among the
 candidates, blends of ``interp`` and ``hermite`` towards ``match`` are saved too
-(``interp_m0.25`` ... ``hermite_m1.0``: that share of the way to ``match``).
+(``interp_m0.25`` ... ``hermite_m1.0``: that share of the way to ``match``), and how far
+``match`` and ``hermite`` disagree (``*_match_hermite_dev``, squared joint distance).
 
     python tools/tune_bones.py OUTDIR [candidate ...]
     MOCAP_GAPFILL_TUNE_TAKES=01_08,02_05,... python tools/tune_bones.py OUTDIR [candidate ...]
@@ -103,6 +104,9 @@ def main(out, names=CANDIDATES):
                     # when filling, unlike the error
                     saved[f"{where}_{name}_dev"] = job._errors(made[name], shown, where_copies)
                 if {"match", "hermite"} <= set(made):
+                    # how far the two candidates disagree (known when filling)
+                    saved[f"{where}_match_hermite_dev"] = job._errors(
+                        made["match"], job.world(made["hermite"]), where_copies)
                     for base in ("interp", "hermite"):
                         for share in SHARES:
                             saved[f"{where}_{base}_m{share}"] = job._errors(
