@@ -160,7 +160,10 @@ def _start(library, out):
                              str(library["root"]), "-o", str(out), "--jobs", "2",
                              "--method", "rigid", "--quiet"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+                            env={**os.environ, "OMP_NUM_THREADS": "1"},
+                            # as from a terminal, also where this run's shell ignores Ctrl-C
+                            # (a background job of a script inherits SIGINT ignored)
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def _wait_for(out, lines, proc, limit=120):

@@ -3,15 +3,40 @@
 # and the whole suite on bpy 5.2 (Python 3.13, numpy 2; numpy backend) and bpy 5.0 (Python 3.11,
 # numpy 1, torch 2.13.0 CPU, ray, dask: the torch backend and the torch/numpy parity tests, the
 # batch command's cluster engines).
+# Two lanes run side by side, one per core (every test pins its threads to one): bpy 4.2 then
+# bpy 5.2 in one, bpy 5.0 in the other; each lane's output is printed when it ends.
 # Data comes from ../shared/data (MOCAP_GAPFILL_DATA overrides).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
 export MOCAP_GAPFILL_REQUIRE_DATA=1 MOCAP_GAPFILL_REQUIRE_BPY=1
-echo "== bpy 4.2 LTS (Python 3.11): add-on tests"
-.venv42/bin/python -m pytest -q -p no:cacheprovider tests/addon
-echo "== bpy 5.2 (Python 3.13): all tests"
-.venv52/bin/python -m pytest -q -p no:cacheprovider tests
-echo "== bpy 5.0 (Python 3.11) with torch (CPU): all tests"
-MOCAP_GAPFILL_REQUIRE_TORCH=1 MOCAP_GAPFILL_REQUIRE_CLUSTER=1 .venv/bin/python -m pytest -q -p no:cacheprovider tests "$@"
+logs=$(mktemp -d)
+trap 'rm -rf "$logs"' EXIT
+
+lane_a() {
+  echo "== bpy 4.2 LTS (Python 3.11): add-on tests"
+  .venv42/bin/python -m pytest -q -p no:cacheprovider tests/addon || return
+  echo "== bpy 5.2 (Python 3.13): all tests"
+  .venv52/bin/python -m pytest -q -p no:cacheprovider tests
+}
+
+lane_b() {
+  echo "== bpy 5.0 (Python 3.11) with torch (CPU): all tests"
+  MOCAP_GAPFILL_REQUIRE_TORCH=1 MOCAP_GAPFILL_REQUIRE_CLUSTER=1 \
+    .venv/bin/python -m pytest -q -p no:cacheprovider tests "$@"
+}
+
+start=$SECONDS
+lane_a >"$logs/a" 2>&1 &
+a=$!
+lane_b "$@" >"$logs/b" 2>&1 &
+b=$!
+rc_a=0 rc_b=0
+wait "$a" || rc_a=$?
+echo "-- lane 1 (bpy 4.2, bpy 5.2) ended after $((SECONDS - start)) s, exit $rc_a"
+cat "$logs/a"
+wait "$b" || rc_b=$?
+echo "-- lane 2 (bpy 5.0 + torch) ended after $((SECONDS - start)) s, exit $rc_b"
+cat "$logs/b"
+[ "$rc_a" = 0 ] && [ "$rc_b" = 0 ]
