@@ -181,7 +181,7 @@ def fill_rigid(pos, donors=RIGID_DONORS):
 
 
 def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cache=None,
-                    reach=None):
+                    reach=None, should_cancel=None):
     """:func:`fill_rigid` and, per sample it carried, the RMS spread (metres) of its donors'
     distances to it: near 0 where the point rides on a rigid segment with them (NaN elsewhere).
 
@@ -196,6 +196,7 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     donors are seen; the two are weighted by the inverse of their donors' squared spread plus
     :data:`SPREAD_FLOOR` squared. With many points gone at once, the gap's ends often miss the
     steadiest donors and the fill from the ends falls back to partners on other segments.
+    ``should_cancel()``, asked before each gap, may stop the work (KeyboardInterrupt).
     """
     pos = np.asarray(pos, dtype=np.float64)
     seen = np.isfinite(pos[..., 0])
@@ -204,6 +205,8 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     stats = {} if cache is None else cache
     partners = pos if partners is None else np.asarray(partners, dtype=np.float64)
     for p, a, b in gap_runs(~seen):
+        if should_cancel and should_cancel():
+            raise KeyboardInterrupt
         if p not in stats:  # the partners' spread, and the partners steadiest first
             spread = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
             order = np.flatnonzero(np.isfinite(spread))

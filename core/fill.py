@@ -130,6 +130,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate also reaches past the
     gap's ends (:data:`AUTO_REACH`).
     """
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
     from .baselines import rigid_estimates
     from .recover import KnnSettings, fill_knn
 
@@ -144,19 +147,32 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     reach, alone = ((AUTO_REACH, AUTO_RIGID_FIRST_MARKERS) if motion.parents is None
                     else (None, AUTO_RIGID_FIRST))
 
+    stop = threading.Event()  # the fill ended early: the rigid estimates beside it stop too
+
     def carried(target):
         rigid, spread = rigid_estimates(target.positions, AUTO_DONORS, weighted=True,
                                         partners=motion.positions, cache=partners,
-                                        reach=reach)
+                                        reach=reach, should_cancel=lambda: stop.is_set() or bool(
+                                            should_cancel and should_cancel()))
         return np.where(np.isnan(spread)[..., None], np.nan, rigid)
 
+    hidden = motion.replace(positions=np.where(probe[..., None], np.nan, motion.positions))
+    # the rigid estimates need no knowledge base: they run beside its first fill (numpy lets go
+    # of the interpreter in its products; the results are the same as one after the other)
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        estimates = pool.submit(lambda: (carried(hidden) if probe.any() else None,
+                                         carried(motion)))
+        try:
+            knn = (fill_knn(hidden, kb, settings, progress=lambda f, m: progress(0.5 * f, m),
+                            should_cancel=should_cancel).positions if probe.any() else None)
+        except BaseException:
+            stop.set()  # cancelled or failed: the estimates stop at their next gap
+            raise
+        on_copies, rigid = estimates.result()
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point
     if probe.any():
-        hidden = motion.replace(positions=np.where(probe[..., None], np.nan, motion.positions))
-        knn = fill_knn(hidden, kb, settings, progress=lambda f, m: progress(0.5 * f, m),
-                       should_cancel=should_cancel).positions
         errors = [np.where(probe, np.sum((out - motion.positions) ** 2, axis=2), 0).sum(axis=0)
-                  for out in (knn, carried(hidden))]
+                  for out in (knn, on_copies)]
         # a method that left some copy unfilled is not weighed against the other
         e_knn, e_rigid = (np.nan_to_num(e, nan=np.inf) for e in errors)
         seen = probe.any(axis=0)
@@ -167,7 +183,6 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         # points their rigid partners carry alone
         first = seen & (e_rigid < e_knn) & (e_rigid < alone ** 2 * probe.sum(axis=0))
         weight[first] = 0.0
-    rigid = carried(motion)
     ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
     # the knowledge base sees those as observed (they are never another point's donors: an
     # estimate carried on would add its error to the next)

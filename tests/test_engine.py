@@ -290,6 +290,45 @@ def test_auto_beats_the_studio_fills_on_a_busy_marker_capture(data_dir):
     assert scores["auto"] < 0.8 * min(scores["rigid"], scores["pattern"], scores["knn"])
 
 
+def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
+    """auto's rigid estimates run on a thread beside the knowledge base's first fill: Ctrl-C
+    there (a KeyboardInterrupt in the main thread, no should_cancel) stops both at once, and no
+    thread is left behind."""
+    import threading
+    import time
+
+    from mocap_gapfill.core import baselines, recover
+    from mocap_gapfill.core.fill import validation_gaps
+    from mocap_gapfill.core.motion import gap_runs
+
+    c3d = data_dir / "cmu/c3d"
+    take = read_motion(c3d / "85_02.c3d")
+    miss = punch_gaps(take.n_frames, take.n_points, "markers", 0.3, np.random.default_rng(0))
+    gaps_done = []
+    real = baselines._carry
+
+    def counted(*args, **kwargs):
+        gaps_done.append(1)
+        return real(*args, **kwargs)
+
+    def interrupted(*args, **kwargs):  # the user presses Ctrl-C once the estimates are going
+        while len(gaps_done) < 3:
+            time.sleep(0.001)
+        raise KeyboardInterrupt
+
+    before = threading.active_count()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(baselines, "_carry", counted)
+        patch.setattr(recover, "fill_knn", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            fill(with_gaps(take, miss), "auto", kb=build_kb([c3d / "01_01.c3d"]))
+    assert threading.active_count() == before
+    calls = 2 * (len(gap_runs(miss)) + len(gap_runs(miss | validation_gaps(miss))))
+    assert len(gaps_done) < calls / 10  # the estimates stopped well short of every gap
+    with pytest.raises(KeyboardInterrupt):
+        baselines.rigid_estimates(with_gaps(take, miss).positions, should_cancel=lambda: True)
+
+
 def test_local_models_are_shared_above_model_fps(data_dir):
     """Frames in between reuse the local model before them (same missing points): at 120 fps
     and the default 30 models a second, a quarter of the models, within 3 % of the accuracy."""
