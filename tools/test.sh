@@ -4,7 +4,7 @@
 # numpy 1, torch 2.13.0 CPU, ray, dask: the torch backend and the torch/numpy parity tests, the
 # batch command's cluster engines).
 # Two lanes run side by side, one per core (every test pins its threads to one): bpy 4.2 then
-# bpy 5.2 in one, bpy 5.0 in the other; each lane's output is printed when it ends.
+# bpy 5.2 in one (lane_a), bpy 5.0 in the other (lane_b); their output is printed at the end.
 # Data comes from ../shared/data (MOCAP_GAPFILL_DATA overrides).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,16 +27,21 @@ lane_b() {
     .venv/bin/python -m pytest -q -p no:cacheprovider tests "$@"
 }
 
+timed() {  # run a lane; its last line says how long it took
+  local rc=0
+  "$@" || rc=$?
+  echo "-- $1 ended after $((SECONDS - start)) s, exit $rc"
+  return "$rc"
+}
+
 start=$SECONDS
-lane_a >"$logs/a" 2>&1 &
+timed lane_a >"$logs/a" 2>&1 &
 a=$!
-lane_b "$@" >"$logs/b" 2>&1 &
+timed lane_b "$@" >"$logs/b" 2>&1 &
 b=$!
 rc_a=0 rc_b=0
 wait "$a" || rc_a=$?
-echo "-- lane 1 (bpy 4.2, bpy 5.2) ended after $((SECONDS - start)) s, exit $rc_a"
 cat "$logs/a"
 wait "$b" || rc_b=$?
-echo "-- lane 2 (bpy 5.0 + torch) ended after $((SECONDS - start)) s, exit $rc_b"
 cat "$logs/b"
 [ "$rc_a" = 0 ] && [ "$rc_b" = 0 ]
