@@ -7,9 +7,9 @@ MotionBuilder BVH and the 43-joint Daz BVH skeletons, the CMU/HDM05 41-marker se
 markers); shoulders stand in for hips when no hip pair is present.
 
 Robust to gaps: per frame, the root is the mean of its reference points where all are present;
-where they are missing it is interpolated in time from the frames that have them (held constant
-before the first and after the last), and likewise the facing angle (unwrapped). A clip in which
-no frame shows the reference points raises :class:`GapFillError`.
+where only some are, the take's own pelvis (their median normalised positions) is fitted to
+those present; with fewer than two it is carried from the frames around (see :func:`frames_of`).
+A clip in which no frame shows the reference points raises :class:`GapFillError`.
 """
 
 from dataclasses import dataclass
@@ -31,6 +31,11 @@ _REFERENCES = [
 ]
 _SHOULDERS = [(["lclavicle"], ["rclavicle"]), (["leftshoulder"], ["rightshoulder"]),
               (["lcollar"], ["rcollar"]), (["lsho"], ["rsho"])]
+
+
+#: frames showing every reference point that :func:`frames_of` needs to take the take's own
+#: template of them (fewer: the knowledge base's)
+OWN_TEMPLATE_FRAMES = 5
 
 
 @dataclass(frozen=True)
@@ -88,22 +93,28 @@ def find_reference(names):
 def frames_of(positions, reference, template=None):
     """Per-frame root (frames, 3) and facing angle (frames,) of a motion, robust to gaps.
 
-    Where the reference points are missing, the root is carried rigidly from the nearest frames
-    on either side that have it (a 2-D Kabsch fit of the points present in both), and the facing
-    follows the present mirror pair (e.g. the buttocks or the shoulders) whose line keeps the
-    steadiest angle to the hip line, with that angle's offset interpolated across the run. With
-    no usable points both are interpolated in time (held at clip ends).
-
-    When no frame shows all the reference points, ``template`` (their typical normalised
-    positions, e.g. a knowledge base's median pose) is fitted rigidly to those present in each
-    frame that shows at least two of them.
+    Where some reference points are missing, a template of them (their median normalised
+    positions over the frames that show them all, or, in fewer than
+    :data:`OWN_TEMPLATE_FRAMES` frames, ``template``: e.g. a knowledge base's median pose) is
+    fitted rigidly (turn about Z, shift) to those present in each frame that shows at least two.
+    Where fewer are seen, the root is carried rigidly from the nearest frames on either side that
+    have it (a 2-D Kabsch fit of the points present in both), and the facing follows the present
+    mirror pair (e.g. the buttocks or the shoulders) whose line keeps the steadiest angle to the
+    hip line, with that angle's offset interpolated across the run. With no usable points both
+    are interpolated in time (held at clip ends).
     """
     pos = np.asarray(positions, dtype=np.float64)
     root = pos[:, list(reference.root)].mean(axis=1)
     angle = _line_angle(pos, reference.left, reference.right)
     known = np.isfinite(root).all(axis=1) & np.isfinite(angle)
-    if not known.any() and template is not None:
-        root, angle, known = _fit_template(pos, reference, template)
+    if known.sum() >= OWN_TEMPLATE_FRAMES:  # the take's own: its markers sit where they sit
+        template = np.median(normalize(pos[known][:, reference_points(reference)], root[known],
+                                       angle[known]), axis=0)
+    if template is not None:  # frames that show some of the reference points
+        fit_root, fit_angle, fitted = _fit_template(pos, reference, template)
+        fitted &= ~known
+        root[fitted], angle[fitted] = fit_root[fitted], fit_angle[fitted]
+        known |= fitted
     if not known.any():
         raise GapFillError("the root and hip points are missing in every frame: cannot normalise")
     unwrapped = np.zeros(len(angle))
