@@ -132,6 +132,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
+    from dataclasses import replace
 
     from .baselines import rigid_estimates
     from .recover import KnnSettings, fill_knn
@@ -163,7 +164,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         estimates = pool.submit(lambda: (carried(hidden) if probe.any() else None,
                                          carried(motion)))
         try:
-            knn = (fill_knn(hidden, kb, settings, progress=lambda f, m: progress(0.5 * f, m),
+            # one pass: its only use is to weigh the methods
+            knn = (fill_knn(hidden, kb, replace(settings, renormalise=False),
+                            progress=lambda f, m: progress(0.5 * f, m),
                             should_cancel=should_cancel).positions if probe.any() else None)
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap

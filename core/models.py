@@ -55,6 +55,9 @@ class KnnSettings:
     #: ``segment_overlap`` frames of the next and cross-faded into it (memory stays bounded)
     segment_frames: int = 6000
     segment_overlap: int = 600
+    #: where the root or hips were in a gap, normalise again with their fill and model again the
+    #: frames whose normalisation moved (``auto``'s refill of its copies does without)
+    renormalise: bool = True
     #: where the search and the local models' products run: "auto" (torch on a CUDA GPU, else
     #: torch on the CPU, else numpy when torch is absent), "numpy", "cpu" or "cuda" (torch)
     device: str = "auto"

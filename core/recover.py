@@ -141,14 +141,16 @@ def _fill_piece(motion, kb, settings, progress, should_cancel, report):
     cache = {}
     filled_pos = _fill_pass(pos, masks, root, angle, index, limbs, lengths, motion.fps,
                             settings, progress, should_cancel, cache, 0.0, 0.6)
-    if missing[:, reference_points(reference)].any():
+    if settings.renormalise and missing[:, reference_points(reference)].any():
         # the root or hips were in a gap: normalise again with their filled positions, and
         # model again the frames whose normalisation changed
         root2, angle2 = frames_of(filled_pos, reference, template)
+        turn = np.abs(np.angle(np.exp(1j * (angle2 - angle))))  # unwrapped apart by 2 pi: same
         cache["changed"] = ((np.linalg.norm(root2 - root, axis=1) > CHANGE_ROOT)
-                            | (np.abs(angle2 - angle) > CHANGE_ANGLE))
-        filled_pos = _fill_pass(pos, masks, root2, angle2, index, limbs, lengths, motion.fps,
-                                settings, progress, should_cancel, cache, 0.6, 1.0)
+                            | (turn > CHANGE_ANGLE))
+        if cache["changed"].any():
+            filled_pos = _fill_pass(pos, masks, root2, angle2, index, limbs, lengths, motion.fps,
+                                    settings, progress, should_cancel, cache, 0.6, 1.0)
     out = motion.positions.copy()
     out[:, q_index] = filled_pos
     filled = np.zeros_like(motion.missing)
