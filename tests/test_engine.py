@@ -297,7 +297,9 @@ def test_auto_beats_the_studio_fills_on_a_busy_marker_capture(data_dir):
     miss the point's steadiest partners, so auto's rigid estimate also carries it from the
     nearest frames where they are seen, and partners within 20 mm on the copies carry a marker
     alone. Measured when written: auto 69.2 mm, rigid 107.1, knn 144.2, pattern 169.0 (session
-    7's auto, from the gap ends and within 5 mm: 106.9)."""
+    7's auto, from the gap ends and within 5 mm: 106.9; session 15's, one pass over the copies
+    and the pelvis fitted to its markers seen: 66.1, knn 142.9). The pelvis is often in a gap:
+    knn's second pass, normalised with it filled, is worth 12 % (one pass: 162.9)."""
     c3d = data_dir / "cmu/c3d"
     jump = read_motion(c3d / "85_02.c3d")
     kb = build_kb([c3d / "01_01.c3d", c3d / "135_02.c3d"])
@@ -305,8 +307,11 @@ def test_auto_beats_the_studio_fills_on_a_busy_marker_capture(data_dir):
     query = with_gaps(jump, miss)
     scores = {m: rmse_mm(fill(query, m, kb=kb), jump, miss)
               for m in ("auto", "rigid", "pattern", "knn")}
+    scores["knn, one pass"] = rmse_mm(fill(query, "knn", kb=kb,
+                                           settings=KnnSettings(renormalise=False)), jump, miss)
     print(scores)
     assert scores["auto"] < 0.8 * min(scores["rigid"], scores["pattern"], scores["knn"])
+    assert scores["knn"] < 0.93 * scores["knn, one pass"]
 
 
 def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
