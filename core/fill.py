@@ -1,5 +1,7 @@
 """One entry point for every gap-filling method: :func:`fill`."""
 
+import warnings
+
 import numpy as np
 
 from . import baselines
@@ -30,6 +32,11 @@ AUTO_RIGID_FIRST_MARKERS = 0.02
 #: neighbours along a bone chain (a bone's length is constant, the chain still bends), which
 #: frames further away carry wrong
 AUTO_REACH = 3
+#: copies shorter than the gaps (a take with no room for full-length ones, e.g. a limb gone
+#: for half of it) flatter the rigid estimate, whose error grows with the distance from the
+#: gap's ends: its error on them is raised to at least this many times its donors' mean
+#: squared spread over the gaps, times (gap length / copy length - 1), at most 1
+AUTO_SPREAD_CAP = 2.0
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
@@ -128,7 +135,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     knowledge base where whole segments or long stretches are gone. The donors are chosen and
     weighted by how steady their distance to the point is over the take
     (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate also reaches past the
-    gap's ends (:data:`AUTO_REACH`).
+    gap's ends (:data:`AUTO_REACH`). Copies shorter than the gaps do not vouch for the rigid
+    estimate beyond its donors' spread (:data:`AUTO_SPREAD_CAP`).
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
@@ -155,13 +163,13 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                         partners=motion.positions, cache=partners,
                                         reach=reach, should_cancel=lambda: stop.is_set() or bool(
                                             should_cancel and should_cancel()))
-        return np.where(np.isnan(spread)[..., None], np.nan, rigid)
+        return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
 
     hidden = motion.replace(positions=np.where(probe[..., None], np.nan, motion.positions))
     # the rigid estimates need no knowledge base: they run beside its first fill (numpy lets go
     # of the interpreter in its products; the results are the same as one after the other)
     with ThreadPoolExecutor(max_workers=1) as pool:
-        estimates = pool.submit(lambda: (carried(hidden) if probe.any() else None,
+        estimates = pool.submit(lambda: (carried(hidden) if probe.any() else (None, None),
                                          carried(motion)))
         try:
             # one pass: its only use is to weigh the methods
@@ -171,13 +179,14 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
-        on_copies, rigid = estimates.result()
+        (on_copies, _), (rigid, spread) = estimates.result()
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point
     if probe.any():
         errors = [np.where(probe, np.sum((out - motion.positions) ** 2, axis=2), 0).sum(axis=0)
                   for out in (knn, on_copies)]
         # a method that left some copy unfilled is not weighed against the other
         e_knn, e_rigid = (np.nan_to_num(e, nan=np.inf) for e in errors)
+        e_rigid = np.maximum(e_rigid, _spread_floor(missing, probe, spread))
         seen = probe.any(axis=0)
         with np.errstate(invalid="ignore"):
             share = e_rigid / (e_knn + e_rigid)
@@ -206,6 +215,23 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
            + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
               f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
     return _with_fill(motion, out)
+
+
+def _spread_floor(missing, probe, spread):
+    """Per point, the least squared error (summed over its copies) of the rigid estimate where
+    its copies are shorter than its gaps (:data:`AUTO_SPREAD_CAP`); 0 elsewhere."""
+    with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # points with no spread: nan
+        longer = np.clip(_mean_run(missing) / _mean_run(probe) - 1, 0, 1)
+        mean = np.nanmean(np.where(missing, spread ** 2, np.nan), axis=0)
+    return np.nan_to_num(AUTO_SPREAD_CAP * longer * mean * probe.sum(axis=0))
+
+
+def _mean_run(mask):
+    """Mean length of each column's runs of True (nan where none)."""
+    runs = mask[:1].sum(axis=0) + (mask[1:] & ~mask[:-1]).sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return mask.sum(axis=0) / runs
 
 
 def validation_gaps(missing, per_point=3, margin=10):
