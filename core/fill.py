@@ -229,7 +229,7 @@ def _spread_floor(missing, probe, spread):
 
 def _mean_run(mask):
     """Mean length of each column's runs of True (nan where none)."""
-    runs = mask[:1].sum(axis=0) + (mask[1:] & ~mask[:-1]).sum(axis=0)
+    runs = np.bincount([p for p, _, _ in gap_runs(mask)], minlength=mask.shape[1])
     with np.errstate(invalid="ignore", divide="ignore"):
         return mask.sum(axis=0) / runs
 

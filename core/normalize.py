@@ -108,8 +108,8 @@ def frames_of(positions, reference, template=None):
     angle = _line_angle(pos, reference.left, reference.right)
     known = np.isfinite(root).all(axis=1) & np.isfinite(angle)
     if known.sum() >= OWN_TEMPLATE_FRAMES:  # the take's own: its markers sit where they sit
-        template = np.median(normalize(pos[known][:, reference_points(reference)], root[known],
-                                       angle[known]), axis=0)
+        template = reference_template(normalize(pos[known], root[known], angle[known]),
+                                      reference)
     if template is not None:  # frames that show some of the reference points
         fit_root, fit_angle, fitted = _fit_template(pos, reference, template)
         fitted &= ~known
