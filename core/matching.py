@@ -33,8 +33,11 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
     it may raise to stop).
     """
+    # each pose's features and their squares per item, float32 like the poses: one product
+    # per stretch and speed gives every term of the distances that involves the poses
     flat = kb_features.reshape(len(kb_features), -1)
-    sq = (kb_features.astype(np.float64) ** 2).sum(axis=2)
+    table = np.concatenate([flat, (kb_features.astype(np.float64) ** 2).sum(axis=2)],
+                           axis=1).astype(np.float32)
     out = []
     for done, (lo, hi) in enumerate(stretches):
         if on_stretch:
@@ -50,7 +53,7 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
             if len(times) > len(flat):
                 continue
             q, w = _sample(features, weight, times)
-            sums = _diagonal_sums(q, w, flat, sq)
+            sums = _diagonal_sums(q, w, table)
             for piece, centre in enumerate(centres):
                 first = int(np.ceil((centre - half - lo) / step - 1e-9))
                 last = min(int((centre + half - lo) / step + 1e-9), len(times) - 1)
@@ -115,14 +118,18 @@ def _sample(features, weight, times):
             np.minimum(weight[i0], weight[i1]))
 
 
-def _diagonal_sums(q, w, flat, sq):
+def _diagonal_sums(q, w, table):
     """(rows, poses): entry ``[k, j]`` the weighted squared distance of query rows ..k to
     knowledge-base poses ..j laid along one diagonal (row k against pose j, row k - 1 against
     pose j - 1, ...), so a window of rows a..b starting at pose t costs
-    ``[b, t + b - a] - [a - 1, t - 1]`` (the second term 0 where a or t is 0)."""
+    ``[b, t + b - a] - [a - 1, t - 1]`` (the second term 0 where a or t is 0). ``table``: each
+    pose's features and, per item, their sum of squares. The product with them is float32, like
+    the poses (features of unit size: errors far below the costs that rank windows); the sums
+    along the diagonals float64."""
     width = len(q)
-    qw = (q * w[..., None]).reshape(width, -1)
-    sums = w @ sq.T - 2.0 * (qw @ flat.T) + (w * (q ** 2).sum(axis=2)).sum(axis=1)[:, None]
+    lhs = np.concatenate([(-2.0 * q * w[..., None]).reshape(width, -1), w], axis=1)
+    sums = (lhs.astype(np.float32) @ table.T).astype(np.float64)
+    sums += (w * (q ** 2).sum(axis=2)).sum(axis=1)[:, None]
     for k in range(1, width):
         sums[k, 1:] += sums[k - 1, :-1]
     return sums
