@@ -33,6 +33,8 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
     it may raise to stop).
     """
+    if not stretches:  # the table below costs a pass over the whole knowledge base
+        return []
     # each pose's features and their squares per item, float32 like the poses: one product
     # per stretch and speed gives every term of the distances that involves the poses
     flat = kb_features.reshape(len(kb_features), -1)
