@@ -15,8 +15,8 @@ frames:
   in overlapping pieces of 0.5 s (1 s where several bones are gapped together) at a few
   playback speeds; each gapped bone takes the windows' mean rotation, times an offset slerped
   across the gap from what meets the keys at either end. Needs a knowledge base built from
-  armature takes of the same skeleton (``KnowledgeBase.turns``). The take's own stretches
-  with every key in place are searched too;
+  armature takes of the same skeleton (``KnowledgeBase.turns``). The take itself is searched
+  too, wherever it keys the bones a stretch lacks;
 - ``knn``: the knowledge base's joint positions near ``hermite``: the local models of
   :mod:`.recover`, fitted to the K nearest poses over every joint, pull the joints the gaps
   move towards likely poses, the more the further a frame lies from a key
@@ -270,7 +270,7 @@ class _Job:
         rotation of each gapped bone, times an offset slerped across the gap from what it takes
         to meet the keys at either end. Needs a knowledge base with bone rotations; bones it
         lacks keep ``basis``."""
-        from .matching import match_windows
+        from .matching import at_times, match_windows
 
         kb, rig = self.kb, self.rig
         bones = [b for b, name in enumerate(rig.names) if name in kb.bones and not rig.roots[b]]
@@ -294,13 +294,18 @@ class _Job:
         for lo, hi in stretches:
             near[lo:hi + 1] = gap[lo:hi + 1].any(axis=0)
         weight[near & ~gap] = MATCH_CONTEXT_WEIGHT
-        # the take's own stretches with every key in place: the same subject, the same style
-        own, own_source = _resampled_runs(features, ~gaps.any(axis=1), self.fps / kb.fps)
-        if MATCH_OWN and len(own):
-            kb_features = np.concatenate([kb_features, own.astype(np.float32)])
-            source = np.concatenate([kb.source_index, own_source + kb.source_index.max() + 1])
+        # the take itself where the bones a stretch lacks are keyed (other gapped bones as
+        # Blender interpolates them): the same subject, the same style
+        if MATCH_OWN:
+            times = np.arange(0, frames - 1 + 1e-9, self.fps / kb.fps)  # at the KB's rate
+            kb_features = np.concatenate([kb_features, at_times(features, times, frames - 1)
+                                          .astype(np.float32)])
+            source = np.concatenate([kb.source_index,
+                                     np.full(len(times), kb.source_index.max() + 1)])
+            hidden = np.concatenate([np.zeros((len(kb.turns), len(bones)), bool),
+                                     at_times(gap.astype(float), times, frames - 1) > 0])
         else:
-            source = kb.source_index
+            source, hidden = kb.source_index, None
         # matched in pieces: short ones where one bone is gapped (the rest of the body says
         # much), longer ones where several are
         predicted, before = [None] * len(stretches), 0
@@ -314,7 +319,7 @@ class _Job:
                 self.progress((before + done) / len(stretches), "matching the knowledge base")
             found = match_windows(features, weight, kb_features, source, self.fps, kb.fps,
                                   [stretches[i] for i in chosen], width=width,
-                                  on_stretch=on_stretch)
+                                  on_stretch=on_stretch, kb_hidden=hidden)
             before += len(chosen)
             for i, mean in zip(chosen, found):
                 predicted[i] = mean
@@ -542,21 +547,6 @@ def _damped(shape, pred, seen, known, a, e):
     line = Slerp([a - 1, e + 1], Rotation.from_matrix(pred[[a - 1, e + 1]]))(span).as_matrix()
     turn = Rotation.from_matrix(shape @ np.swapaxes(line, 1, 2)).as_rotvec() * share
     return Rotation.from_rotvec(turn).as_matrix() @ line
-
-
-def _resampled_runs(values, keep, step):
-    """``values`` (frames, ...) sampled every ``step`` frames (linear) along each run of
-    ``keep``, and the run each sample belongs to."""
-    from .matching import at_times
-
-    out, source = [], []
-    for i, (_, a, e) in enumerate(gap_runs(keep[:, None])):
-        times = a + step * np.arange(int((e - a) / step) + 1)
-        out.append(at_times(values, times, e))
-        source.append(np.full(len(times), i))
-    if not out:
-        return np.zeros((0,) + values.shape[1:]), np.zeros(0, int)
-    return np.concatenate(out), np.concatenate(source)
 
 
 def _orthonormal(six):

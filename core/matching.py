@@ -18,7 +18,7 @@ TOP = 5
 
 
 def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretches,
-                  speeds=SPEEDS, top=TOP, width=None, on_stretch=None):
+                  speeds=SPEEDS, top=TOP, width=None, on_stretch=None, kb_hidden=None):
     """Per stretch ``(lo, hi)`` of take frames: the mean, over the ``top`` best windows of the
     knowledge base, of their features at each frame lo..hi (an array (hi - lo + 1, items, d)),
     or None where the knowledge base has no window that long.
@@ -27,7 +27,9 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     (0: unknown); ``kb_features`` (poses, items, d) at ``kb_fps``, consecutive poses of one
     ``kb_source`` being consecutive frames. A window's cost is its weighted sum of squared
     feature differences over the stretch, sampled at the knowledge base's rate; windows of one
-    source closer than half their width to a better one are left out. ``width`` (seconds):
+    source closer than half their width to a better one are left out, and so are windows with a
+    pose where ``kb_hidden`` (poses, items) marks an item the stretch lacks (weight 0 somewhere
+    in it) as unknown: the take itself can be a source. ``width`` (seconds):
     match pieces of the stretch this long, a quarter of it apart, instead of the whole stretch,
     and blend their means with overlapping triangles (the first and last piece reach the
     stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
@@ -44,6 +46,10 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     for done, (lo, hi) in enumerate(stretches):
         if on_stretch:
             on_stretch(done)
+        hidden = None  # how many poses up to each one lack an item the stretch needs
+        if kb_hidden is not None:
+            needed = ~(weight[lo:hi + 1] > 0).all(axis=0)
+            hidden = np.concatenate([[0], np.cumsum(kb_hidden[:, needed].any(axis=1))])
         frames = np.arange(lo, hi + 1)
         half = (hi - lo) / 2 if width is None else min(width * fps, hi - lo) / 2
         count = 1 if width is None else int(np.ceil((hi - lo - 2 * half) / (half / 2) - 1e-9)) + 1
@@ -67,6 +73,8 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
                     cost[1:] -= sums[first - 1, :len(flat) - span]
                 cost = cost / max(w[first:last + 1].sum(), 1e-12)
                 cost = np.where(kb_source[:len(cost)] == kb_source[span - 1:], cost, np.inf)
+                if hidden is not None:
+                    cost[hidden[span:] > hidden[:len(cost)]] = np.inf
                 best = np.argpartition(cost, min(top * 4, len(cost)) - 1)[:top * 4]
                 for t in best[np.argsort(cost[best])]:
                     if np.isfinite(cost[t]):
