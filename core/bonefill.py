@@ -294,8 +294,8 @@ class _Job:
         for lo, hi in stretches:
             near[lo:hi + 1] = gap[lo:hi + 1].any(axis=0)
         weight[near & ~gap] = MATCH_CONTEXT_WEIGHT
-        # the take itself where the bones a stretch lacks are keyed (other gapped bones as
-        # Blender interpolates them): the same subject, the same style
+        # the take itself wherever it keys the bones gapped in a stretch (not counting its
+        # context; other gapped bones as Blender interpolates them): the same subject and style
         if MATCH_OWN:
             times = np.arange(0, frames - 1 + 1e-9, self.fps / kb.fps)  # at the KB's rate
             kb_features = np.concatenate([kb_features, at_times(features, times, frames - 1)
@@ -319,7 +319,9 @@ class _Job:
                 self.progress((before + done) / len(stretches), "matching the knowledge base")
             found = match_windows(features, weight, kb_features, source, self.fps, kb.fps,
                                   [stretches[i] for i in chosen], width=width,
-                                  on_stretch=on_stretch, kb_hidden=hidden)
+                                  on_stretch=on_stretch, kb_hidden=hidden,
+                                  needs=[gap[busy[i][0]:busy[i][1] + 1].any(axis=0)
+                                         for i in chosen])
             before += len(chosen)
             for i, mean in zip(chosen, found):
                 predicted[i] = mean

@@ -18,7 +18,8 @@ TOP = 5
 
 
 def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretches,
-                  speeds=SPEEDS, top=TOP, width=None, on_stretch=None, kb_hidden=None):
+                  speeds=SPEEDS, top=TOP, width=None, on_stretch=None, kb_hidden=None,
+                  needs=None):
     """Per stretch ``(lo, hi)`` of take frames: the mean, over the ``top`` best windows of the
     knowledge base, of their features at each frame lo..hi (an array (hi - lo + 1, items, d)),
     or None where the knowledge base has no window that long.
@@ -28,8 +29,9 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     ``kb_source`` being consecutive frames. A window's cost is its weighted sum of squared
     feature differences over the stretch, sampled at the knowledge base's rate; windows of one
     source closer than half their width to a better one are left out, and so are windows with a
-    pose where ``kb_hidden`` (poses, items) marks an item the stretch lacks (weight 0 somewhere
-    in it) as unknown: the take itself can be a source. ``width`` (seconds):
+    pose where ``kb_hidden`` (poses, items) marks an item the stretch needs as unknown (the take
+    itself can be a source): ``needs`` (per stretch, items) bool, by default the items with
+    weight 0 somewhere in the stretch. ``width`` (seconds):
     match pieces of the stretch this long, a quarter of it apart, instead of the whole stretch,
     and blend their means with overlapping triangles (the first and last piece reach the
     stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
@@ -48,7 +50,7 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
             on_stretch(done)
         hidden = None  # how many poses up to each one lack an item the stretch needs
         if kb_hidden is not None:
-            needed = ~(weight[lo:hi + 1] > 0).all(axis=0)
+            needed = ~(weight[lo:hi + 1] > 0).all(axis=0) if needs is None else needs[done]
             hidden = np.concatenate([[0], np.cumsum(kb_hidden[:, needed].any(axis=1))])
         frames = np.arange(lo, hi + 1)
         half = (hi - lo) / 2 if width is None else min(width * fps, hi - lo) / 2
