@@ -129,7 +129,7 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, daz
             assert mm[0] <= 2 * mm[1] + 5.0, (rig.names[b], a, e, mm)
             worse += mm[0] > 1.1 * mm[1] + 2.0
         assert worse <= len(gap_runs(gaps)) / 8
-        unknown = (gaps.astype(int) @ below.astype(int)) > 0
+        unknown = rig.moved(gaps)
         rmse = [np.sqrt(np.mean(np.sum((rig.joints(x) - joints) ** 2, axis=2)[unknown]))
                 for x in (auto, interp)]
         print(f"\n07_05, gaps of {length} frames: auto {1000 * rmse[0]:.1f} mm, "
@@ -248,14 +248,13 @@ def test_match_finds_the_bone_in_the_take_itself(data_dir, daz_rotation_kb, monk
         data_dir / "cmu/bvh/daz_friendly/02/02_05.bvh.gz", skip_frames=6)
     kb = kb_without(daz_rotation_kb, "02")
     joints = rig.joints(basis_matrices(rig, channels, location))
-    below = rig.placed_by()
     squared = {True: [], False: []}
     for name in ("rShin", "lForeArm", "chest"):
         gaps = np.zeros(channels.shape[:2], bool)
         for start in range(120, len(channels) - 240, 480):
             gaps[start:start + 120, rig.names.index(name)] = True
         seen = interpolate_channels(channels, gaps)
-        unknown = (gaps.astype(int) @ below.astype(int)) > 0
+        unknown = rig.moved(gaps)
         for own in (True, False):
             monkeypatch.setattr(bonefill, "MATCH_OWN", own)
             filled = fill_bones(rig, seen, location, gaps, fps, kb=kb, method="match")
