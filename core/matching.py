@@ -29,9 +29,8 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     ``kb_source`` being consecutive frames. A window's cost is its weighted sum of squared
     feature differences over the stretch, sampled at the knowledge base's rate; windows of one
     source closer than half their width to a better one are left out, and so are windows with a
-    pose where ``kb_hidden`` (poses, items) marks an item the stretch needs as unknown (the take
-    itself can be a source): ``needs`` (per stretch, items) bool, by default the items with
-    weight 0 somewhere in the stretch. ``width`` (seconds):
+    pose where ``kb_hidden`` (poses, items) marks an item the stretch needs (``needs``: per
+    stretch, (items,) bool) as unknown: the take itself can be a source. ``width`` (seconds):
     match pieces of the stretch this long, a quarter of it apart, instead of the whole stretch,
     and blend their means with overlapping triangles (the first and last piece reach the
     stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
@@ -50,8 +49,7 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
             on_stretch(done)
         hidden = None  # how many poses up to each one lack an item the stretch needs
         if kb_hidden is not None:
-            needed = ~(weight[lo:hi + 1] > 0).all(axis=0) if needs is None else needs[done]
-            hidden = np.concatenate([[0], np.cumsum(kb_hidden[:, needed].any(axis=1))])
+            hidden = np.concatenate([[0], np.cumsum(kb_hidden[:, needs[done]].any(axis=1))])
         frames = np.arange(lo, hi + 1)
         half = (hi - lo) / 2 if width is None else min(width * fps, hi - lo) / 2
         count = 1 if width is None else int(np.ceil((hi - lo - 2 * half) / (half / 2) - 1e-9)) + 1
