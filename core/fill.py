@@ -37,6 +37,12 @@ AUTO_REACH = 3
 #: gap's ends: its error on them is raised to at least this many times its donors' mean
 #: squared spread over the gaps, times (gap length / copy length - 1), at most 1
 AUTO_SPREAD_CAP = 2.0
+#: skeleton joints whose gaps last this many seconds on the mean also get the knowledge base's
+#: windows of motion (:func:`~.matching.fill_match`) beside its per-frame models, the two
+#: weighted by their errors on the point's copies: a limb gone for seconds takes real motion of
+#: a body that moved like this one (on shorter gaps the windows' mean misses the pose the models
+#: fit; on marker sets the windows never refilled the copies better, and cost time)
+AUTO_MATCH_SECONDS = 1.0
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
@@ -136,13 +142,17 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     weighted by how steady their distance to the point is over the take
     (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate also reaches past the
     gap's ends (:data:`AUTO_REACH`). Copies shorter than the gaps do not vouch for the rigid
-    estimate beyond its donors' spread (:data:`AUTO_SPREAD_CAP`).
+    estimate beyond its donors' spread (:data:`AUTO_SPREAD_CAP`). On points with long gaps
+    (:data:`AUTO_MATCH_SECONDS`) the knowledge base's estimate is its models' fill and its
+    windows of motion (:func:`~.matching.fill_match`) weighted by their errors on the copies,
+    the windows only where they refill them better.
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
     from dataclasses import replace
 
     from .baselines import rigid_estimates
+    from .matching import fill_match
     from .recover import KnnSettings, fill_knn
 
     report = report or (lambda message: None)
@@ -150,6 +160,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     settings = settings or KnnSettings()
     missing = motion.missing
     probe = validation_gaps(missing, AUTO_PROBES)
+    with np.errstate(invalid="ignore"):
+        long = (probe.any(axis=0) & (_mean_run(missing) >= AUTO_MATCH_SECONDS * motion.fps)
+                & (motion.parents is not None))
 
     partners = {}  # the donors' statistics on this take, computed once
     # marker sets reach past the gap ends and let partners carry a marker alone within more
@@ -158,19 +171,24 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
 
     stop = threading.Event()  # the fill ended early: the rigid estimates beside it stop too
 
+    def stopped():
+        return stop.is_set() or bool(should_cancel and should_cancel())
+
     def carried(target):
         rigid, spread = rigid_estimates(target.positions, AUTO_DONORS, weighted=True,
                                         partners=motion.positions, cache=partners,
-                                        reach=reach, should_cancel=lambda: stop.is_set() or bool(
-                                            should_cancel and should_cancel()))
+                                        reach=reach, should_cancel=stopped)
         return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
 
     hidden = motion.replace(positions=np.where(probe[..., None], np.nan, motion.positions))
-    # the rigid estimates need no knowledge base: they run beside its first fill (numpy lets go
-    # of the interpreter in its products; the results are the same as one after the other)
+    # the rigid estimates and the windows need no local models: they run beside the first fill
+    # (numpy lets go of the interpreter in its products; the results are the same as one after
+    # the other)
     with ThreadPoolExecutor(max_workers=1) as pool:
         estimates = pool.submit(lambda: (carried(hidden) if probe.any() else (None, None),
-                                         carried(motion)))
+                                         carried(motion),
+                                         fill_match(hidden, kb, long, stopped).positions
+                                         if long.any() else None))
         try:
             # one pass: its only use is to weigh the methods
             knn = (fill_knn(hidden, kb, replace(settings, renormalise=False),
@@ -179,17 +197,28 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
-        (on_copies, _), (rigid, spread) = estimates.result()
+        (on_copies, _), (rigid, spread), matched = estimates.result()
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point
     if probe.any():
-        errors = [np.where(probe, np.sum((out - motion.positions) ** 2, axis=2), 0).sum(axis=0)
-                  for out in (knn, on_copies)]
-        # a method that left some copy unfilled is not weighed against the other
-        e_knn, e_rigid = (np.nan_to_num(e, nan=np.inf) for e in errors)
+        def on_copies_of(out):
+            """Per point, the squared error summed over its copies (a method that left some
+            copy unfilled: inf, not weighed against the other)."""
+            error = np.where(probe, np.sum((out - motion.positions) ** 2, axis=2), 0).sum(axis=0)
+            return np.nan_to_num(error, nan=np.inf)
+
+        e_knn, e_rigid = on_copies_of(knn), on_copies_of(on_copies)
         e_rigid = np.maximum(e_rigid, _spread_floor(missing, probe, spread))
         seen = probe.any(axis=0)
+        e_kb = e_knn  # of the knowledge base's estimate: the models, with the windows on long gaps
+        if long.any():
+            e_match = on_copies_of(matched)
+            # the windows join where they refilled the point's copies better than the models
+            e_match = np.where(long & (e_match < e_knn), e_match, np.inf)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                windows = np.nan_to_num(e_knn / (e_knn + e_match), nan=1.0)  # their share
+                e_kb = 1.0 / (1.0 / e_knn + 1.0 / e_match)
         with np.errstate(invalid="ignore"):
-            share = e_rigid / (e_knn + e_rigid)
+            share = e_rigid / (e_kb + e_rigid)
         weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
                                 np.isfinite(e_knn[seen]).astype(float))
         # points their rigid partners carry alone
@@ -202,6 +231,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     start = 0.5 if probe.any() else 0.0
     knn = fill_knn(given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
                    should_cancel=should_cancel, report=report).positions
+    if long.any() and (windows > 0).any():
+        matched = fill_match(given, kb, windows > 0, should_cancel).positions
+        part = np.where(np.isnan(matched[..., :1]), 0.0, windows[None, :, None])
+        knn = knn * (1 - part) + np.nan_to_num(matched) * part
+        report(f"auto: windows of the knowledge base's motion join its models on "
+               f"{int((windows > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
     w = np.broadcast_to(weight[None], missing.shape).copy()
     w[np.isnan(rigid[..., 0])] = 1.0
     w[np.isnan(knn[..., 0])] = 0.0

@@ -6,10 +6,16 @@ predict jitters from frame to frame; what the knowledge base holds is motion. He
 stretch of frames - the gap and some context either side, where the gapped bones are known too -
 and the answer the knowledge-base windows of consecutive poses whose known features move most
 like it, played at a few speeds. The mean of the best windows' features is the prediction; it is
-smooth because each window is real motion.
+smooth because each window is real motion. The armature fill matches bone rotations
+(:mod:`.bonefill`); :func:`fill_match` matches normalised joint or marker positions, for
+``auto``'s points with long gaps (:mod:`.fill`).
 """
 
 import numpy as np
+
+from .kb import match_names
+from .motion import blend_into_gaps, gap_runs
+from .normalize import denormalize, frames_of, normalize, reference_template
 
 #: playback speeds of the knowledge base tried against the take
 SPEEDS = (0.8, 0.9, 1.0, 1.12, 1.25)
@@ -143,3 +149,73 @@ def _diagonal_sums(q, w, table):
     for k in range(1, width):
         sums[k, 1:] += sums[k - 1, :-1]
     return sums
+
+
+#: seconds of context either side of a gap, of the pieces matched, and of the chunks a long
+#: stretch is matched in (overlapping by a piece, cross-faded: memory stays bounded)
+POSE_CONTEXT = 0.5
+POSE_PIECE = 1.0
+POSE_CHUNK = 4.0
+
+
+def fill_match(motion, kb, points=None, should_cancel=None):
+    """Motion matching in position space: each stretch of frames with ``points`` missing
+    ((points,) bool, default all; the other gaps stay as they are) and
+    :data:`POSE_CONTEXT` either side) takes the mean of the knowledge-base windows whose poses,
+    normalised as the knowledge base's are, move most like the take's present points
+    (:func:`match_windows`, pieces of :data:`POSE_PIECE`), each gap offset to meet the
+    observations at its ends. A whole limb gone for seconds takes real motion of a body that
+    moved like this one; where few points are missing the per-frame models of ``knn`` fit the
+    pose better. The motion with those gaps filled (NaN where no window matched).
+    """
+    common, _ = match_names(kb, motion.names)
+    q = [motion.names.index(n) for n in common]
+    kb_poses = kb.poses[:, [kb.names.index(n) for n in common]]
+    reference = kb.reference_for(common)
+    pos = motion.positions[:, q]
+    missing = np.isnan(pos[..., 0])
+    wanted = missing if points is None else missing & np.asarray(points)[q]
+    root, angle = frames_of(pos, reference, reference_template(kb_poses, reference))
+    features = np.nan_to_num(normalize(pos, root, angle))
+    fps, frames = motion.fps, len(pos)
+    margin, chunk, over = (int(round(s * fps)) for s in (POSE_CONTEXT, POSE_CHUNK, POSE_PIECE))
+    stretches, joins = [], []
+    for _, a, e in gap_runs(wanted.any(axis=1)[:, None]):
+        lo, hi = max(0, a - margin), min(frames - 1, e + margin)
+        while True:
+            last = min(hi, lo + chunk - 1)
+            stretches.append((lo, last))
+            joins.append((lo > max(0, a - margin), last < hi))
+            if last >= hi:
+                break
+            lo = last - over + 1
+    found = match_windows(features, (~missing).astype(float), kb_poses, kb.source_index, fps,
+                          kb.fps, stretches, width=POSE_PIECE,
+                          on_stretch=_cancel_check(should_cancel))
+    total, share = np.zeros(pos.shape), np.zeros(frames)
+    for (lo, hi), (after, before), mean in zip(stretches, joins, found):
+        if mean is None:
+            continue
+        w = np.ones(hi - lo + 1)
+        ramp = (np.arange(min(over, len(w))) + 1) / (over + 1)
+        if after:  # cross-faded with the chunk before
+            w[:len(ramp)] = ramp
+        if before:
+            w[len(w) - len(ramp):] = ramp[::-1]
+        total[lo:hi + 1] += w[:, None, None] * mean
+        share[lo:hi + 1] += w
+    with np.errstate(invalid="ignore", divide="ignore"):
+        pred = denormalize(total / share[:, None, None], root, angle)
+    model = wanted.copy()
+    model[1:] |= wanted[:-1]
+    model[:-1] |= wanted[1:]
+    out = motion.positions.copy()
+    out[:, q] = blend_into_gaps(pos, pred, wanted, model)
+    return motion.replace(positions=out)
+
+
+def _cancel_check(should_cancel):
+    def check(done):
+        if should_cancel and should_cancel():
+            raise KeyboardInterrupt
+    return check
