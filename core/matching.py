@@ -156,6 +156,9 @@ def _diagonal_sums(q, w, table):
 POSE_CONTEXT = 0.5
 POSE_PIECE = 1.0
 POSE_CHUNK = 4.0
+#: the knowledge base's poses are matched at most this many a second (a second of motion is
+#: seen well at 30 poses; the cost grows with the square of the rate)
+POSE_FPS = 30.0
 
 
 def fill_match(motion, kb, points=None, should_cancel=None):
@@ -170,7 +173,8 @@ def fill_match(motion, kb, points=None, should_cancel=None):
     """
     common, _ = match_names(kb, motion.names)
     q = [motion.names.index(n) for n in common]
-    kb_poses = kb.poses[:, [kb.names.index(n) for n in common]]
+    stride = max(1, int(round(kb.fps / POSE_FPS)))
+    kb_poses = kb.poses[::stride, [kb.names.index(n) for n in common]]
     reference = kb.reference_for(common)
     pos = motion.positions[:, q]
     missing = np.isnan(pos[..., 0])
@@ -189,8 +193,9 @@ def fill_match(motion, kb, points=None, should_cancel=None):
             if last >= hi:
                 break
             lo = last - over + 1
-    found = match_windows(features, (~missing).astype(float), kb_poses, kb.source_index, fps,
-                          kb.fps, stretches, width=POSE_PIECE,
+    found = match_windows(features, (~missing).astype(float), kb_poses,
+                          kb.source_index[::stride], fps, kb.fps / stride, stretches,
+                          width=POSE_PIECE,
                           on_stretch=_cancel_check(should_cancel))
     total, share = np.zeros(pos.shape), np.zeros(frames)
     for (lo, hi), (after, before), mean in zip(stretches, joins, found):
