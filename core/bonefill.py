@@ -43,7 +43,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from .errors import GapFillError
 from .kb import match_names
-from .motion import Motion, blend_into_gaps, gap_runs, skeleton_limbs
+from .motion import Motion, blend_into_gaps, gap_runs, skeleton_limbs, widened
 from .posing import best_rotation, child_handles, forward, order_bones, rotation_between, \
     solve_pose, tail_handles
 from .rig import aligned_turns, basis_matrices, basis_turns, hermite_channels, \
@@ -221,16 +221,14 @@ class _Job:
                                                 GUESS_SPEED * away[:, None])
         # also model a frame either side of each gap: the model's offset from the keys there
         # is blended across the gap (its bias, not the shape it gives the gap)
-        widened = unknown.copy()
-        widened[1:] |= unknown[:-1]
-        widened[:-1] |= unknown[1:]
+        around = widened(unknown)
         seen = self.world(basis)
         model = soft_poses(seen, list(self.rig.names), doubt, self.with_take(seen, unknown),
                            self.fps, self.settings or KnnSettings(),
-                           frames=np.flatnonzero(widened.any(axis=1)),
+                           frames=np.flatnonzero(around.any(axis=1)),
                            should_cancel=self.should_cancel)
         world = blend_into_gaps(np.where(unknown[..., None], np.nan, seen), model, unknown,
-                                widened)
+                                around)
         return self.armature(world, unknown)
 
     def with_take(self, world, unknown):

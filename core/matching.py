@@ -14,7 +14,7 @@ smooth because each window is real motion. The armature fill matches bone rotati
 import numpy as np
 
 from .kb import match_names
-from .motion import blend_into_gaps, gap_runs
+from .motion import blend_into_gaps, gap_runs, widened
 from .normalize import denormalize, frames_of, normalize, reference_template
 
 #: playback speeds of the knowledge base tried against the take
@@ -211,11 +211,8 @@ def fill_match(motion, kb, points=None, should_cancel=None):
         share[lo:hi + 1] += w
     with np.errstate(invalid="ignore", divide="ignore"):
         pred = denormalize(total / share[:, None, None], root, angle)
-    model = wanted.copy()
-    model[1:] |= wanted[:-1]
-    model[:-1] |= wanted[1:]
     out = motion.positions.copy()
-    out[:, q] = blend_into_gaps(pos, pred, wanted, model)
+    out[:, q] = blend_into_gaps(pos, pred, wanted, widened(wanted))
     return motion.replace(positions=out)
 
 

@@ -236,6 +236,15 @@ def interpolate_rows(values, valid):
     return out.reshape(values.shape)
 
 
+def widened(mask):
+    """(frames, points) ``mask`` with one more frame either side of each run: where a model is
+    evaluated beside a gap, for :func:`blend_into_gaps` to meet the data at its ends."""
+    out = mask.copy()
+    out[1:] |= mask[:-1]
+    out[:-1] |= mask[1:]
+    return out
+
+
 def blend_into_gaps(pos, pred, missing, model):
     """Observed values kept; each gap takes the prediction plus the observation-minus-prediction
     offset at its two ends, blended linearly (one end at clip ends)."""

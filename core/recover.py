@@ -37,7 +37,7 @@ from .energy import Problem
 from .errors import GapFillError
 from .kb import match_names
 from .models import KnnSettings, fit_models, kb_index, model_sources, noise_factor
-from .motion import blend_into_gaps
+from .motion import blend_into_gaps, widened
 from .normalize import denormalize, frames_of, normalize, reference_points, reference_template
 
 #: a second pass models again the frames whose root moved more than this (m) or whose facing
@@ -126,9 +126,7 @@ def _fill_piece(motion, kb, settings, progress, should_cancel, report):
     limbs = limbs.reshape(-1, 2)
     lengths = _clip_lengths(pos, limbs, index.poses)
     # the model's mask: the gaps, widened by one frame each side (boundary predictions)
-    model = missing.copy()
-    model[1:] |= missing[:-1]
-    model[:-1] |= missing[1:]
+    model = widened(missing)
     thin = (~model).sum(axis=1) < settings.min_present
     model[thin] = missing[thin]  # too little left: do not widen there
     empty = (~missing).sum(axis=1) < settings.min_present
