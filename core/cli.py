@@ -345,8 +345,9 @@ def build_parser(extra=None):
 
     p = sub.add_parser("evaluate", help="accuracy of the methods on punched gaps in real data")
     p.add_argument("--protocol", required=True,
-                   choices=["joints", "markers", "bodyparts", "realgaps", "bones"],
-                   help="realgaps: the gaps of real captures (--gap-sources) on complete takes; "
+                   choices=["joints", "markers", "bodyparts", "shortgaps", "realgaps", "bones"],
+                   help="shortgaps: dropouts of 3-24 frames; "
+                        "realgaps: the gaps of real captures (--gap-sources) on complete takes; "
                         "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
                         "rate; methods auto, knn, interp, slerp, positions")
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")

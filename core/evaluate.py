@@ -5,6 +5,9 @@ Protocols:
   interval (m in {3, 6}, l in {15, 30, 60, 90, 120} at the evaluation frame rate);
 - ``markers``: in each 60-frame interval a fraction (10, 20, 30 %) of the points is removed;
 - ``bodyparts``: a whole limb or half of the body is removed for the middle half of the clip;
+- ``shortgaps``: the dropouts of a few frames that most real captures have: random points lose
+  ``l`` frames at random places (l in {3, 6, 12, 24} at the evaluation frame rate) until 5 % of
+  the samples are gone;
 - ``realgaps``: the gaps a real capture has (``gap_sources``: takes with gaps of their own, e.g.
   CMU 01_01.c3d), transplanted by point name onto the complete test take, the source's mask
   repeated in time where the test take is longer, so gap lengths and co-occurrence are real.
@@ -28,6 +31,8 @@ from .recover import KnnSettings
 
 JOINT_SETTINGS = [(m, l) for m in (3, 6) for l in (15, 30, 60, 90, 120)]
 MARKER_RATES = (0.1, 0.2, 0.3)
+SHORT_GAPS = (3, 6, 12, 24)
+SHORT_GAPS_RATE = 0.05
 BODY_PARTS = ("left_arm", "right_arm", "left_leg", "right_leg", "upper_body", "lower_body",
               "left_side", "right_side")
 _ARM = re.compile(r"(arm|hand|wrist|elbow|shoulder|sho|collar|clavicle|humerus|radius|finger|"
@@ -87,6 +92,10 @@ def punch_gaps(n_frames, n_points, protocol, setting, rng, names=None):
         if not pts:
             raise GapFillError(f"no points of {setting} found by name")
         miss[n_frames // 4: 3 * n_frames // 4, pts] = True
+    elif protocol == "shortgaps":
+        for _ in range(max(1, int(round(SHORT_GAPS_RATE * n_frames * n_points / setting)))):
+            s = rng.integers(1, n_frames - setting - 1)
+            miss[s:s + setting, rng.integers(n_points)] = True
     elif protocol == "realgaps":
         miss = real_gaps(setting, names, n_frames)
     else:
@@ -117,6 +126,8 @@ def settings_of(protocol, gap_sources=()):
         return [(f"rate={r}", r) for r in MARKER_RATES]
     if protocol == "bodyparts":
         return [(f"part={p}", p) for p in BODY_PARTS]
+    if protocol == "shortgaps":
+        return [(f"l={l}", l) for l in SHORT_GAPS]
     if protocol == "realgaps":
         if not gap_sources:
             raise GapFillError("protocol realgaps needs takes with real gaps (--gap-sources)")

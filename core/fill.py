@@ -43,6 +43,15 @@ AUTO_SPREAD_CAP = 2.0
 #: a body that moved like this one (on shorter gaps the windows' mean misses the pose the models
 #: fit; on marker sets the windows never refilled the copies better, and cost time)
 AUTO_MATCH_SECONDS = 1.0
+#: gaps of at most this many seconds are also blended with a spline through the take
+#: (:func:`_with_spline`), by its error on up to ``AUTO_SPLINE_COPIES`` copies of each gap, kept
+#: ``AUTO_SPLINE_MARGIN`` frames from any gap and within ``AUTO_SPLINE_REACH`` gap lengths of
+#: theirs (tuned, docs/METHOD_NOTES.md: over longer gaps a spline's error has a tail that its
+#: copies do not foresee)
+AUTO_SPLINE_SECONDS = 0.2
+AUTO_SPLINE_COPIES = 4
+AUTO_SPLINE_MARGIN = 10
+AUTO_SPLINE_REACH = 4
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
@@ -145,7 +154,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     estimate beyond its donors' spread (:data:`AUTO_SPREAD_CAP`). On points with long gaps
     (:data:`AUTO_MATCH_SECONDS`) the knowledge base's estimate is its models' fill and its
     windows of motion (:func:`~.matching.fill_match`) weighted by their errors on the copies,
-    the windows only where they refill them better.
+    the windows only where they refill them better. Short gaps (:data:`AUTO_SPLINE_SECONDS`)
+    are last blended with a spline through the take by its error on copies of each gap
+    (:func:`_with_spline`).
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
@@ -191,7 +202,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                          if long.any() else None))
         try:
             # one pass: its only use is to weigh the methods
-            knn = (fill_knn(hidden, kb, replace(settings, renormalise=False),
+            knn_copies = (fill_knn(hidden, kb, replace(settings, renormalise=False),
                             progress=lambda f, m: progress(0.5 * f, m),
                             should_cancel=should_cancel).positions if probe.any() else None)
         except BaseException:
@@ -206,7 +217,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             error = np.where(probe, np.sum((out - motion.positions) ** 2, axis=2), 0).sum(axis=0)
             return np.nan_to_num(error, nan=np.inf)
 
-        e_knn, e_rigid = on_copies_of(knn), on_copies_of(on_copies)
+        e_knn, e_rigid = on_copies_of(knn_copies), on_copies_of(on_copies)
         e_rigid = np.maximum(e_rigid, _spread_floor(missing, probe, spread))
         seen = probe.any(axis=0)
         e_kb = e_knn  # of the knowledge base's estimate: the models, with the windows on long gaps
@@ -232,17 +243,15 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     knn = fill_knn(given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
                    should_cancel=should_cancel, report=report).positions
     if long.any() and (windows > 0).any():
-        matched = fill_match(given, kb, windows > 0, should_cancel).positions
-        part = np.where(np.isnan(matched[..., :1]), 0.0, windows[None, :, None])
-        knn = knn * (1 - part) + np.nan_to_num(matched) * part
+        knn = _with_windows(knn, fill_match(given, kb, windows > 0, should_cancel).positions,
+                            windows)
         report(f"auto: windows of the knowledge base's motion join its models on "
                f"{int((windows > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
-    w = np.broadcast_to(weight[None], missing.shape).copy()
-    w[np.isnan(rigid[..., 0])] = 1.0
-    w[np.isnan(knn[..., 0])] = 0.0
-    out = np.where(np.isnan(knn), 0, knn) * w[..., None] + \
-        np.where(np.isnan(rigid), 0, rigid) * (1 - w[..., None])
-    out[np.isnan(knn[..., 0]) & np.isnan(rigid[..., 0])] = np.nan
+    out = _blend(knn, rigid, weight)
+    if probe.any():
+        if long.any():
+            knn_copies = _with_windows(knn_copies, matched, windows)
+        out = _with_spline(motion, out, probe, _blend(knn_copies, on_copies, weight), report)
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
     report(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped points "
@@ -250,6 +259,76 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
            + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
               f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
     return _with_fill(motion, out)
+
+
+def _with_windows(knn, matched, windows):
+    """The models' fill with the windows' (:func:`~.matching.fill_match`) mixed in at each
+    point's share ``windows`` where they have an estimate."""
+    part = np.where(np.isnan(matched[..., :1]), 0.0, windows[None, :, None])
+    return knn * (1 - part) + np.nan_to_num(matched) * part
+
+
+def _blend(kb, rigid, weight):
+    """``weight`` (per point) of the knowledge base's estimate and the rest of the rigid one;
+    where one of them has none, the other alone."""
+    w = np.broadcast_to(weight[None], kb.shape[:2]).copy()
+    w[np.isnan(rigid[..., 0])] = 1.0
+    w[np.isnan(kb[..., 0])] = 0.0
+    out = np.where(np.isnan(kb), 0, kb) * w[..., None] + \
+        np.where(np.isnan(rigid), 0, rigid) * (1 - w[..., None])
+    out[np.isnan(kb[..., 0]) & np.isnan(rigid[..., 0])] = np.nan
+    return out
+
+
+def _with_spline(motion, out, probe, on_copies, report):
+    """``out`` with each gap blended towards a cubic spline of its point through the take
+    (:func:`~.baselines.fill_spline`) by inverse errors: the spline's on up to
+    :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
+    frames where it is observed), ``out``'s on the point's copies (``probe``, filled
+    ``on_copies``), both per sample. Over a few frames a point moves along a smooth curve that
+    the spline follows within a millimetre, closer than any estimate carried from other points;
+    over longer gaps its error grows fast, with a tail its copies do not foresee, so only gaps
+    of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline across
+    them) and points without copies keep ``out``."""
+    from .baselines import fill_spline
+
+    missing = motion.missing
+    per_sample = np.where(probe, np.sum((on_copies - motion.positions) ** 2, axis=2), 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        e_out = per_sample.sum(axis=0) / probe.sum(axis=0)  # nan without copies
+    # copy k of every gap goes into round k: copies of one round never meet, those of one gap
+    # never overlap, and all lie within AUTO_SPLINE_REACH gap lengths of their gap
+    rounds, copies = np.zeros((AUTO_SPLINE_COPIES,) + missing.shape, bool), []
+    for p, a, b in gap_runs(missing):
+        if (a == 0 or b == len(missing) - 1 or not np.isfinite(e_out[p])
+                or b - a + 1 > round(AUTO_SPLINE_SECONDS * motion.fps)):
+            continue
+        length, own, starts = b - a + 1, missing[:, p].copy(), []
+        for k, hidden in enumerate(rounds):
+            start = _copy_start(own | hidden[:, p], a, length, AUTO_SPLINE_MARGIN,
+                                AUTO_SPLINE_REACH * (length + AUTO_SPLINE_MARGIN))
+            if start is not None:
+                hidden[start:start + length, p] = own[start:start + length] = True
+                starts.append((k, start))
+        if starts:
+            copies.append((p, a, b, starts))
+    if not copies:
+        return out
+    error = [np.sum((fill_spline(np.where(hidden[..., None], np.nan, motion.positions))
+                     - motion.positions) ** 2, axis=2) if hidden.any() else None
+             for hidden in rounds]
+    spline = fill_spline(motion.positions)
+    out = out.copy()
+    eased = 0
+    for p, a, b, starts in copies:
+        e_spline = np.mean([error[k][s:s + b - a + 1, p].mean() for k, s in starts])
+        share = e_out[p] / (e_out[p] + e_spline + 1e-24)
+        out[a:b + 1, p] = (1 - share) * out[a:b + 1, p] + share * spline[a:b + 1, p]
+        eased += share >= 0.5
+    if eased:
+        report(f"auto: a spline through the take carries {eased} of {len(copies)} gaps more "
+               f"than the other estimates")
+    return out
 
 
 def _spread_floor(missing, probe, spread):
@@ -284,21 +363,24 @@ def validation_gaps(missing, per_point=3, margin=10):
             length = (b - a + 1) // shrink
             if count[p] >= per_point or (shrink > 1 and count[p]) or length < min(4, b - a + 1):
                 continue
-            count[p] += _copy_gap(missing, probe, p, a, length, margin)
+            start = _copy_start(missing[:, p] | probe[:, p], a, length, margin)
+            if start is not None:
+                probe[start:start + length, p] = True
+                count[p] += 1
     return probe
 
 
-def _copy_gap(missing, probe, p, a, length, margin):
-    """Mark in ``probe`` the copy of point ``p``'s gap (starting at ``a``, ``length`` frames)
-    at the nearest start at least ``length + margin`` frames away whose frames, and one either
-    side, are observed and not yet a copy; whether there was one."""
-    busy = np.concatenate([[0], np.cumsum(missing[:, p] | probe[:, p])])
-    starts = np.arange(1, len(missing) - length)
-    free = busy[starts + length + 1] - busy[starts - 1] == 0
-    away = np.abs(starts - a) >= length + margin
-    starts = starts[free & away]
-    if not len(starts):
-        return False
-    start = starts[np.argmin(np.abs(starts - a))]
-    probe[start:start + length, p] = True
-    return True
+def _copy_start(busy, a, length, margin, reach=None):
+    """Where a copy of a gap (starting at ``a``, ``length`` frames) of a point that is ``busy``
+    (missing, or copied already) at some frames goes: the nearest start at least ``length +
+    margin`` frames away (at most ``reach``) whose frames, and one either side, are not busy;
+    None where there is none."""
+    taken = np.concatenate([[0], np.cumsum(busy)])
+    starts = np.arange(1, len(busy) - length)
+    distance = np.abs(starts - a)
+    ok = (taken[starts + length + 1] - taken[starts - 1] == 0) & (distance >= length + margin)
+    if reach is not None:
+        ok &= distance <= reach
+    if not ok.any():
+        return None
+    return int(starts[ok][np.argmin(distance[ok])])
