@@ -10,9 +10,9 @@
   are centred and scaled, the principal components of the frames where all points are present
   are fitted to the present coordinates of each incomplete frame (no training data needed);
 - ``rigid``: rigid-body fill (Vicon Nexus "Rigid Body Fill", QTM "rigid body" fill): per missing
-  sample, the 3 points whose distance to it varied least while both were seen carry it from each
-  gap end by a best-fit rigid transform (Kabsch), the two estimates blended linearly across
-  the gap;
+  sample, the 3 points whose distance to it varied least while both were seen (copies of one
+  point counted once) carry it from each gap end by a best-fit rigid transform (Kabsch), the two
+  estimates blended linearly across the gap;
 - ``pattern``: pattern fill (Vicon Nexus "Pattern Fill"): the gap takes the shape of the donor
   trajectory, seen across the whole gap, whose offset to the point varied least while both were
   seen, offset-blended to the point's values at both gap ends;
@@ -25,6 +25,8 @@ those tools would do next.
 Every function takes positions (frames, points, 3) with NaN gaps and returns them filled; points
 missing in every frame stay NaN where a method has nothing to go on.
 """
+
+import warnings
 
 import numpy as np
 
@@ -188,7 +190,8 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     ``weighted`` weighs each donor's fit by the inverse square of its spread. ``partners``:
     positions (same shape, more of them seen) to choose the donors from, e.g. a take whose
     gaps are hidden further to test the fill. ``cache``: a dict kept between calls with the
-    same ``partners``, so their statistics are computed once.
+    same ``partners``, so their statistics are computed once. Of points that are one
+    (:func:`same_points`), only the steadiest is a donor.
 
     ``reach``: a second estimate is weighed in, from the steadiest donors seen at each frame of
     the gap even where they are not seen at its ends, carried from the nearest frames before and
@@ -208,9 +211,14 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
         if p not in stats:  # the partners' spread, and the partners steadiest first
+            if "same" not in stats:
+                stats["same"] = same_points(partners)
             spread = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
             order = np.flatnonzero(np.isfinite(spread))
-            stats[p] = spread, order[np.argsort(spread[order], kind="stable")]
+            order = order[np.argsort(spread[order], kind="stable")]
+            # a second copy of a donor adds nothing to its fit but a turn about the others
+            kept = [j for i, j in enumerate(order) if not stats["same"][j, order[:i]].any()]
+            stats[p] = spread, np.array(kept, dtype=int)
         estimate, rms = _carry(pos, seen, p, a, b, stats[p], donors, weighted)
         if reach:
             estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, a, b, stats[p], donors,
@@ -219,6 +227,20 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
         out[a:b + 1, p][rows] = estimate[rows]
         spreads[a:b + 1, p][rows] = rms[rows]
     return fill_linear(out), spreads
+
+
+def same_points(pos, tolerance=0.001):
+    """(points, points) booleans: the pairs of points that are one, less than ``tolerance``
+    (metres) apart on the mean while both are seen (e.g. HDM05's unlabelled ``*0 *1 *2``,
+    copies of three labelled markers), judged on at most 500 frames."""
+    sample = np.asarray(pos, dtype=np.float64)[::max(1, len(pos) // 500)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # pairs never seen together
+        same = np.array([np.nanmean(np.linalg.norm(sample - sample[:, i:i + 1], axis=2), axis=0)
+                         < tolerance for i in range(sample.shape[1])]).reshape(
+                             (sample.shape[1],) * 2)
+    np.fill_diagonal(same, False)
+    return same
 
 
 def _carry(pos, seen, p, a, b, steady, donors, weighted, reach=None):
