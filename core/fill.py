@@ -203,8 +203,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         try:
             # one pass: its only use is to weigh the methods
             knn_copies = (fill_knn(hidden, kb, replace(settings, renormalise=False),
-                            progress=lambda f, m: progress(0.5 * f, m),
-                            should_cancel=should_cancel).positions if probe.any() else None)
+                                   progress=lambda f, m: progress(0.5 * f, m),
+                                   should_cancel=should_cancel).positions
+                          if probe.any() else None)
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
