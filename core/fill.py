@@ -252,8 +252,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     if probe.any():
         if long.any():
             knn_copies = _with_windows(knn_copies, matched, windows)
-        out = _with_spline(motion, out, probe, _blend(knn_copies, on_copies, weight), weight == 0,
-                           lambda pos: carried(motion.replace(positions=pos))[0], report)
+        out = _with_spline(motion, out, probe, _blend(knn_copies, on_copies, weight), report)
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
     report(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped points "
@@ -282,18 +281,16 @@ def _blend(kb, rigid, weight):
     return out
 
 
-def _with_spline(motion, out, probe, on_copies, rigid_alone, rigid_of, report):
+def _with_spline(motion, out, probe, on_copies, report):
     """``out`` with each gap blended towards a cubic spline of its point through the take
-    (:func:`~.baselines.fill_spline`) by inverse errors per sample: the spline's on up to
+    (:func:`~.baselines.fill_spline`) by inverse errors: the spline's on up to
     :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
     frames where it is observed), ``out``'s on the point's copies (``probe``, filled
-    ``on_copies``) or, where ``rigid_alone`` says the rigid estimate fills the point alone, that
-    estimate's (``rigid_of``: it for positions with more hidden) on the spline's copies. Over a
-    few frames a point moves along a smooth curve that the spline follows within a millimetre,
-    closer than any estimate carried from other points; over longer gaps its error grows fast,
-    with a tail its copies do not foresee, so only gaps of up to :data:`AUTO_SPLINE_SECONDS`
-    take part. Gaps at the take's ends (no spline across them) and points without copies keep
-    ``out``."""
+    ``on_copies``), both per sample. Over a few frames a point moves along a smooth curve that
+    the spline follows within a millimetre, closer than any estimate carried from other points;
+    over longer gaps its error grows fast, with a tail its copies do not foresee, so only gaps
+    of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline across
+    them) and points without copies keep ``out``."""
     from .baselines import fill_spline
 
     missing = motion.missing
@@ -322,20 +319,11 @@ def _with_spline(motion, out, probe, on_copies, rigid_alone, rigid_of, report):
                      - motion.positions) ** 2, axis=2) if hidden.any() else None
              for hidden in rounds]
     spline = fill_spline(motion.positions)
-    # where the rigid estimate alone fills a point, it is scored on the spline's own copies
-    if rigid_alone[[p for p, _, _, _ in copies]].any():
-        rigid_error = [np.sum((rigid_of(np.where(hidden[..., None], np.nan, motion.positions))
-                               - motion.positions) ** 2, axis=2) if hidden.any() else None
-                       for hidden in rounds]
     out = out.copy()
     eased = 0
     for p, a, b, starts in copies:
         e_spline = np.mean([error[k][s:s + b - a + 1, p].mean() for k, s in starts])
-        e_here = e_out[p]
-        if rigid_alone[p]:
-            e_rigid = np.mean([rigid_error[k][s:s + b - a + 1, p].mean() for k, s in starts])
-            e_here = e_rigid if np.isfinite(e_rigid) else e_here
-        share = e_here / (e_here + e_spline + 1e-24)
+        share = e_out[p] / (e_out[p] + e_spline + 1e-24)
         out[a:b + 1, p] = (1 - share) * out[a:b + 1, p] + share * spline[a:b + 1, p]
         eased += share >= 0.5
     if eased:
