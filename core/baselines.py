@@ -207,17 +207,16 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     spreads = np.full(seen.shape, np.nan)
     stats = {} if cache is None else cache
     partners = pos if partners is None else np.asarray(partners, dtype=np.float64)
+    same = same_points(partners)
     for p, a, b in gap_runs(~seen):
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
         if p not in stats:  # the partners' spread, and the partners steadiest first
-            if "same" not in stats:
-                stats["same"] = same_points(partners)
             spread = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
             order = np.flatnonzero(np.isfinite(spread))
             order = order[np.argsort(spread[order], kind="stable")]
             # a second copy of a donor adds nothing to its fit but a turn about the others
-            kept = [j for i, j in enumerate(order) if not stats["same"][j, order[:i]].any()]
+            kept = [j for i, j in enumerate(order) if not same[j, order[:i]].any()]
             stats[p] = spread, np.array(kept, dtype=int)
         estimate, rms = _carry(pos, seen, p, a, b, stats[p], donors, weighted)
         if reach:
