@@ -252,7 +252,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     if probe.any():
         if long.any():
             knn_copies = _with_windows(knn_copies, matched, windows)
-        out = _with_spline(motion, out, probe, _blend(knn_copies, on_copies, weight), report)
+        with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
+            per_sample = on_copies_of(_blend(knn_copies, on_copies, weight)) / probe.sum(axis=0)
+        out = _with_spline(motion, out, per_sample, report)
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
     report(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped points "
@@ -281,22 +283,20 @@ def _blend(kb, rigid, weight):
     return out
 
 
-def _with_spline(motion, out, probe, on_copies, report):
+def _with_spline(motion, out, e_out, report):
     """``out`` with each gap blended towards a cubic spline of its point through the take
     (:func:`~.baselines.fill_spline`) by inverse errors: the spline's on up to
     :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
-    frames where it is observed), ``out``'s on the point's copies (``probe``, filled
-    ``on_copies``), both per sample. Over a few frames a point moves along a smooth curve that
-    the spline follows within a millimetre, closer than any estimate carried from other points;
+    frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; not
+    finite where it has none), both per sample. Over a few frames a point moves along a smooth
+    curve that the spline follows within a millimetre, closer than any estimate carried from
+    other points;
     over longer gaps its error grows fast, with a tail its copies do not foresee, so only gaps
     of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline across
-    them) and points without copies keep ``out``."""
+    them) and points without a finite ``e_out`` keep ``out``."""
     from .baselines import fill_spline
 
     missing = motion.missing
-    per_sample = np.where(probe, np.sum((on_copies - motion.positions) ** 2, axis=2), 0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        e_out = per_sample.sum(axis=0) / probe.sum(axis=0)  # nan without copies
     # copy k of every gap goes into round k: copies of one round never meet, those of one gap
     # never overlap, and all lie within AUTO_SPLINE_REACH gap lengths of their gap
     rounds, copies = np.zeros((AUTO_SPLINE_COPIES,) + missing.shape, bool), []
