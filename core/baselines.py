@@ -38,6 +38,8 @@ from .posing import best_rotation
 RIGID_DONORS = 3
 #: metres added (in quadrature) to the donors' spread when two rigid estimates are weighed
 SPREAD_FLOOR = 0.005
+#: frames (times donors) the search for a gap's nearest references looks at in one batch
+NEAREST_CHUNK = 1 << 20
 
 
 def fill_linear(pos):
@@ -199,7 +201,7 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     donors are seen; the two are weighted by the inverse of their donors' squared spread plus
     :data:`SPREAD_FLOOR` squared. With many points gone at once, the gap's ends often miss the
     steadiest donors and the fill from the ends falls back to partners on other segments.
-    ``should_cancel()``, asked before each gap, may stop the work (KeyboardInterrupt).
+    ``should_cancel()``, asked before each point's gaps, may stop the work (KeyboardInterrupt).
     """
     pos = np.asarray(pos, dtype=np.float64)
     seen = np.isfinite(pos[..., 0])
@@ -208,7 +210,10 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     stats = {} if cache is None else cache
     partners = pos if partners is None else np.asarray(partners, dtype=np.float64)
     same = same_points(partners)
+    runs = {}
     for p, a, b in gap_runs(~seen):
+        runs.setdefault(p, []).append((a, b))
+    for p, gaps in runs.items():
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
         if p not in stats:  # the partners' spread, and the partners steadiest first
@@ -218,13 +223,14 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
             # a second copy of a donor adds nothing to its fit but a turn about the others
             kept = [j for i, j in enumerate(order) if not same[j, order[:i]].any()]
             stats[p] = spread, np.array(kept, dtype=int)
-        estimate, rms = _carry(pos, seen, p, a, b, stats[p], donors, weighted)
+        estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
         if reach:
-            estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, a, b, stats[p], donors,
-                                                            weighted, int(reach * (b - a + 1)))])
+            estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, stats[p], donors,
+                                                            weighted, reach)])
         rows = np.isfinite(rms)
-        out[a:b + 1, p][rows] = estimate[rows]
-        spreads[a:b + 1, p][rows] = rms[rows]
+        frames = np.concatenate([np.arange(a, b + 1) for a, b in gaps])[rows]
+        out[frames, p] = estimate[rows]
+        spreads[frames, p] = rms[rows]
     return fill_linear(out), spreads
 
 
@@ -242,68 +248,85 @@ def same_points(pos, tolerance=0.001):
     return same
 
 
-def _carry(pos, seen, p, a, b, steady, donors, weighted, reach=None):
-    """Rigid estimates of point ``p`` over its gap a..b and their donors' RMS spread (NaN where
+def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
+    """Rigid estimates of point ``p`` over its gaps ``runs`` ((first, last) frames, inclusive)
+    and their donors' RMS spread, one row per gap frame in the order of ``runs`` (NaN where
     none). ``steady``: every point's spread against ``p`` and the points in order of it (the
     steadiest first). Per frame, the steadiest ``donors`` seen there, carried from the gap's
     ends (where the donors must be seen) or, given ``reach``, from the nearest frames within
-    that many frames of the gap where ``p`` and the donors are seen; estimates from references
-    either side are blended linearly across the gap."""
-    estimate = np.full((b - a + 1, 3), np.nan)
-    rms = np.full(b - a + 1, np.nan)
+    ``reach`` times the gap's length where ``p`` and the donors are seen; estimates from
+    references either side are blended linearly across the gap. All gaps of the point are
+    fitted at once (one batch of Kabsch fits)."""
+    frames = len(pos)
+    a, b = np.array(runs, dtype=int).reshape(-1, 2).T
+    length = b - a + 1
+    gap = np.repeat(np.arange(len(a)), length)  # each row's gap
+    t = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length - a, length)
+    estimate = np.full((len(t), 3), np.nan)
+    rms = np.full(len(t), np.nan)
     spread, order = steady
-    if reach is None:
-        ends = _gap_ends(a, b, len(pos))
-        order = order[seen[ends][:, order].all(axis=0)]
-    else:  # donors seen with the point within reach on every side the take has
-        sides = [(seen[lo:hi, order] & seen[lo:hi, p:p + 1]).any(axis=0)
-                 for lo, hi in ((max(0, a - reach), a), (b + 1, b + 1 + reach)) if hi > lo
-                 and lo < len(pos)]
-        order = order[np.all(sides, axis=0)] if sides else order[:0]
     if len(order) < donors:
         return estimate, rms
-    ok = seen[a:b + 1][:, order]
-    # per frame, the steadiest donors seen there; frames sharing a donor set are fitted
-    # together
-    first = ok & (np.cumsum(ok, axis=1) <= donors)
-    full = first.sum(axis=1) == donors
-    if not full.any():
-        return estimate, rms
-    rows = np.flatnonzero(full)
-    # each frame's donor set as one number (the donors' places in ``order``)
-    places = np.nonzero(first[full])[1].reshape(-1, donors)
-    key = np.ravel_multi_index(places.T, (len(order),) * donors)
-    _, sets, which = np.unique(key, return_index=True, return_inverse=True)
-    chosen = order[places[sets]]  # (sets, donors)
+    # the donors each gap may take: seen at its ends, or with the point within reach of them
+    before, after = a > 0, b < frames - 1
     if reach is None:
-        refs = [ends] * len(sets)
+        allowed = np.ones((len(a), len(order)), bool)
+        allowed[before] &= seen[a[before] - 1][:, order]
+        allowed[after] &= seen[b[after] + 1][:, order]
     else:
-        refs = [_nearest_seen(seen, [p, *c], a, b, reach) for c in chosen]
-    w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(chosen.shape)
-    w /= w.sum(axis=1, keepdims=True)
-    has = np.array([bool(r) for r in refs])[which]
-    rows, which = rows[has], which[has]
+        far = (reach * length).astype(int)
+        before &= far > 0
+        after &= far > 0
+        both = np.concatenate([np.zeros((1, len(order)), int),
+                               np.cumsum(seen[:, order] & seen[:, p:p + 1], axis=0)])
+        allowed = before | after
+        allowed = np.broadcast_to(allowed[:, None], (len(a), len(order))).copy()
+        lo = np.maximum(0, a - far)
+        allowed[before] &= both[a[before]] > both[lo[before]]
+        hi = np.minimum(frames, b + 1 + far)
+        allowed[after] &= both[hi[after]] > both[b[after] + 1]
+    ok = seen[t][:, order] & allowed[gap]
+    first = ok & (np.cumsum(ok, axis=1) <= donors)
+    rows = np.flatnonzero(first.sum(axis=1) == donors)
     if not len(rows):
         return estimate, rms
-    cw = w[which][..., None]  # (t, donors, 1)
-    cur = pos[a + rows[:, None], chosen[which]]  # (t, donors, 3)
+    places = np.nonzero(first[rows])[1].reshape(-1, donors)
+    chosen = order[places]  # (rows, donors)
+    g, t = gap[rows], t[rows]
+    if reach is None:
+        refs = np.stack([np.where(before[g], a[g] - 1, -1), np.where(after[g], b[g] + 1, -1)],
+                        axis=1)
+    else:
+        refs = _nearest_seen(seen, p, chosen, g, a, b, far)
+    # each row's first reference (before the gap if any), then its second
+    refs = np.where((refs[:, :1] < 0), refs[:, ::-1], refs)
+    has = refs[:, 0] >= 0
+    rows, chosen, t, refs = rows[has], chosen[has], t[has], refs[has]
+    if not len(rows):
+        return estimate, rms
+    two = refs[:, 1] >= 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        late = np.where(two, (t - refs[:, 0]) / (refs[:, 1] - refs[:, 0]), 0.0)
+    weights = np.stack([np.where(two, 1 - late, 1.0), late], axis=1)
+    w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(chosen.shape)
+    w /= w.sum(axis=1, keepdims=True)
+    cw = w[..., None]  # (rows, donors, 1)
+    cur = pos[t[:, None], chosen]  # (rows, donors, 3)
     c_cur = (cur * cw).sum(axis=1)
-    estimate[rows] = 0.0
-    for k in range(2):  # each frame's first reference (before the gap if any), then its second
-        ref_t = np.array([r[k] if len(r) > k else -1 for r in refs])[which]
-        use = ref_t >= 0
+    found = np.zeros((len(rows), 3))
+    for k in range(2):
+        use = refs[:, k] >= 0
         if not use.any():
             continue
-        weight = np.array([_end_weights(a, b, r)[:, k] if len(r) > k else np.zeros(b - a + 1)
-                           for r in refs])[which, rows]
-        t, r_rows = ref_t[use], rows[use]
-        ref = pos[t[:, None], chosen[which[use]]]  # (t, donors, 3)
+        ref_t = refs[use, k]
+        ref = pos[ref_t[:, None], chosen[use]]  # (rows, donors, 3)
         c_ref = (ref * cw[use]).sum(axis=1)
         rot, _ = best_rotation((ref - c_ref[:, None]) * np.sqrt(cw[use]),
                                (cur[use] - c_cur[use][:, None]) * np.sqrt(cw[use]))
-        moved = np.einsum("fij,fj->fi", rot, pos[t, p] - c_ref) + c_cur[use]
-        estimate[r_rows] += weight[use][:, None] * moved
-    rms[rows] = np.sqrt(np.mean(spread[chosen[which]] ** 2, axis=1))
+        moved = np.einsum("fij,fj->fi", rot, pos[ref_t, p] - c_ref) + c_cur[use]
+        found[use] += weights[use, k][:, None] * moved
+    estimate[rows] = found
+    rms[rows] = np.sqrt(np.mean(spread[chosen] ** 2, axis=1))
     return estimate, rms
 
 
@@ -321,14 +344,33 @@ def _weigh(found):
     return estimate, rms
 
 
-def _nearest_seen(seen, points, a, b, reach):
-    """The last frame before ``a`` and the first after ``b`` where all ``points`` are seen,
-    within ``reach`` frames of the gap (those that exist)."""
-    lo = max(0, a - reach)
-    before = np.flatnonzero(seen[lo:a, points].all(axis=1))
-    after = np.flatnonzero(seen[b + 1:b + 1 + reach, points].all(axis=1))
-    return ([lo + int(before[-1])] if len(before) else []) + \
-        ([b + 1 + int(after[0])] if len(after) else [])
+def _nearest_seen(seen, p, chosen, gap, a, b, far):
+    """Per row (its donors ``chosen``, its ``gap`` among ``a``..``b``): the last frame before
+    the gap and the first after it, at most ``far[gap]`` frames away, where ``p`` and the
+    donors are all seen (-1 where there is none)."""
+    combos, which = np.unique(np.column_stack([gap, chosen]), axis=0, return_inverse=True)
+    which = which.reshape(-1)
+    g, points = combos[:, 0], np.column_stack([np.full(len(combos), p), combos[:, 1:]])
+    out = np.full((len(combos), 2), -1)
+    # combos in order of reach, in chunks of at most NEAREST_CHUNK frames looked at
+    order = np.argsort(far[g], kind="stable")
+    start = 0
+    while start < len(order):
+        stop = start + 1
+        while stop < len(order) and (stop + 1 - start) * far[g[order[stop]]] <= NEAREST_CHUNK:
+            stop += 1
+        some = order[start:stop]
+        steps = np.arange(1, far[g[some]].max() + 1)
+        for side, (edge, sign) in enumerate(((a, -1), (b, 1))):
+            f = edge[g[some]][:, None] + sign * steps
+            inside = (steps <= far[g[some]][:, None]) & (f >= 0) & (f < len(seen))
+            hit = seen[np.clip(f, 0, len(seen) - 1)[..., None], points[some][:, None]].all(
+                axis=2) & inside
+            found = hit.any(axis=1)
+            out[some[found], side] = f[found, hit[found].argmax(axis=1)]
+        start = stop
+    return out[which]
+
 
 
 def fill_pattern(pos):
