@@ -185,7 +185,7 @@ def fill_rigid(pos, donors=RIGID_DONORS):
 
 
 def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cache=None,
-                    reach=None, should_cancel=None):
+                    reach=None, should_cancel=None, only=None):
     """:func:`fill_rigid` and, per sample it carried, the RMS spread (metres) of its donors'
     distances to it: near 0 where the point rides on a rigid segment with them (NaN elsewhere).
 
@@ -202,6 +202,7 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     :data:`SPREAD_FLOOR` squared. With many points gone at once, the gap's ends often miss the
     steadiest donors and the fill from the ends falls back to partners on other segments.
     ``should_cancel()``, asked before each point's gaps, may stop the work (KeyboardInterrupt).
+    ``only``: a (frames, points) mask; the gaps that start outside it keep NaN (and no spread).
     """
     pos = np.asarray(pos, dtype=np.float64)
     seen = np.isfinite(pos[..., 0])
@@ -212,7 +213,8 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     same = same_points(partners)
     runs = {}
     for p, a, b in gap_runs(~seen):
-        runs.setdefault(p, []).append((a, b))
+        if only is None or only[a, p]:
+            runs.setdefault(p, []).append((a, b))
     for p, gaps in runs.items():
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
@@ -231,7 +233,7 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
         frames = np.concatenate([np.arange(a, b + 1) for a, b in gaps])[rows]
         out[frames, p] = estimate[rows]
         spreads[frames, p] = rms[rows]
-    return fill_linear(out), spreads
+    return (fill_linear(out) if only is None else out), spreads
 
 
 def same_points(pos, tolerance=0.001):

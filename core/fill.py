@@ -185,10 +185,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     def stopped():
         return stop.is_set() or bool(should_cancel and should_cancel())
 
-    def carried(target):
+    def carried(target, only=None):
         rigid, spread = rigid_estimates(target.positions, AUTO_DONORS, weighted=True,
                                         partners=motion.positions, cache=partners,
-                                        reach=reach, should_cancel=stopped)
+                                        reach=reach, should_cancel=stopped, only=only)
         return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
 
     hidden = motion.replace(positions=np.where(probe[..., None], np.nan, motion.positions))
@@ -254,7 +254,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             knn_copies = _with_windows(knn_copies, matched, windows)
         with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
             per_sample = on_copies_of(_blend(knn_copies, on_copies, weight)) / probe.sum(axis=0)
-        out = _with_spline(motion, out, per_sample, report)
+        out = _with_spline(motion, out, per_sample, weight == 0,
+                           lambda hidden: carried(motion.replace(positions=np.where(
+                               hidden[..., None], np.nan, motion.positions)), hidden)[0], report)
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
     report(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped points "
@@ -283,17 +285,18 @@ def _blend(kb, rigid, weight):
     return out
 
 
-def _with_spline(motion, out, e_out, report):
+def _with_spline(motion, out, e_out, rigid_alone, rigid_of, report):
     """``out`` with each gap blended towards a cubic spline of its point through the take
-    (:func:`~.baselines.fill_spline`) by inverse errors: the spline's on up to
+    (:func:`~.baselines.fill_spline`) by inverse errors per sample: the spline's on up to
     :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
     frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; not
-    finite where it has none), both per sample. Over a few frames a point moves along a smooth
-    curve that the spline follows within a millimetre, closer than any estimate carried from
-    other points;
-    over longer gaps its error grows fast, with a tail its copies do not foresee, so only gaps
-    of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline across
-    them) and points without a finite ``e_out`` keep ``out``."""
+    finite where it has none) or, where ``rigid_alone`` says the rigid estimate fills the point
+    alone, that estimate's (``rigid_of(hidden)``: it on the samples ``hidden`` with those
+    hidden) on the spline's copies. Over a few frames a point moves along a smooth curve that the spline follows within
+    a millimetre, closer than any estimate carried from other points; over longer gaps its
+    error grows fast, with a tail its copies do not foresee, so only gaps of up to
+    :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline across them) and
+    points without a finite ``e_out`` keep ``out``."""
     from .baselines import fill_spline
 
     missing = motion.missing
@@ -319,11 +322,20 @@ def _with_spline(motion, out, e_out, report):
                      - motion.positions) ** 2, axis=2) if hidden.any() else None
              for hidden in rounds]
     spline = fill_spline(motion.positions)
+    # where the rigid estimate alone fills a point, it is scored on the spline's own copies
+    if rigid_alone[[p for p, _, _, _ in copies]].any():
+        rigid_error = [np.sum((rigid_of(hidden) - motion.positions) ** 2, axis=2)
+                       if hidden.any() else None
+                       for hidden in rounds]
     out = out.copy()
     eased = 0
     for p, a, b, starts in copies:
         e_spline = np.mean([error[k][s:s + b - a + 1, p].mean() for k, s in starts])
-        share = e_out[p] / (e_out[p] + e_spline + 1e-24)
+        e_here = e_out[p]
+        if rigid_alone[p]:
+            e_rigid = np.mean([rigid_error[k][s:s + b - a + 1, p].mean() for k, s in starts])
+            e_here = e_rigid if np.isfinite(e_rigid) else e_here
+        share = e_here / (e_here + e_spline + 1e-24)
         out[a:b + 1, p] = (1 - share) * out[a:b + 1, p] + share * spline[a:b + 1, p]
         eased += share >= 0.5
     if eased:

@@ -378,10 +378,11 @@ def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir, monkeyp
     """85_02 (subject out of the KB) with 5 % of its samples gone in dropouts of 3 and of 12
     frames at 120 fps (the `shortgaps` protocol): over 25-100 ms a marker moves along a smooth
     curve that a spline through the take follows closer than anything carried from other
-    markers, and auto blends it in per gap by its error on copies of that gap. Measured when
-    written (mm, 3 / 12 frames): auto 0.74 / 7.12, without the spline 1.19 / 8.28, spline 0.19 /
-    9.03, rigid 1.06 / 8.30, pattern 1.64 / 10.98. (Over 3 frames of this take the spline alone
-    is closer still: the copies of auto's own fill flatter it on some markers.)"""
+    markers, and auto blends it in per gap by its error on copies of that gap (against the
+    rigid estimate's on the same copies where that estimate fills a marker alone). Measured
+    when written (mm, 3 / 12 frames): auto 0.22 / 4.00, without the spline 1.19 / 8.28, spline
+    0.19 / 9.03, rigid 1.06 / 8.30, pattern 1.64 / 10.98 (scoring the rigid estimate on the
+    marker's own copies instead: auto 0.74 / 7.12)."""
     from mocap_gapfill.core import fill as fill_module
 
     c3d = data_dir / "cmu/c3d"
@@ -397,9 +398,9 @@ def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir, monkeyp
             patch.setattr(fill_module, "AUTO_SPLINE_COPIES", 0)
             scores["alone"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
         print(length, scores)
-        assert scores["auto"] < (0.7 if length == 3 else 0.95) * scores["alone"]
+        assert scores["auto"] < (0.3 if length == 3 else 0.6) * scores["alone"]
         assert scores["auto"] < min(scores["rigid"], scores["pattern"])
-    assert scores["auto"] < scores["spline"]  # 12 frames
+        assert scores["auto"] < (1.3 if length == 3 else 0.6) * scores["spline"]
 
 
 def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
