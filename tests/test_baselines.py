@@ -137,6 +137,7 @@ def test_rigid_estimate_reaches_past_the_gap_ends_when_many_markers_are_gone(dat
     from the ends it is much closer than the ends alone (48.9 -> 38.0 mm when written)."""
     from mocap_gapfill.core.evaluate import punch_gaps
     from mocap_gapfill.core.fill import AUTO_REACH
+    from mocap_gapfill.core.motion import gap_runs
 
     take = read_motion(data_dir / "cmu/c3d/02_05.c3d")
     take = take.select([n for n in take.names if n != "RSHN"])  # its one real gap
@@ -150,6 +151,18 @@ def test_rigid_estimate_reaches_past_the_gap_ends_when_many_markers_are_gone(dat
     assert scores[AUTO_REACH] < 0.85 * scores[None]
     np.testing.assert_array_equal(
         baselines.rigid_estimates(gappy, reach=AUTO_REACH)[0][~miss], gappy[~miss])
+
+    # every gap of a point is fitted in one batch: a gap estimated alone (``only``) comes out
+    # the same, and the gaps outside ``only`` are left unfilled
+    runs = sorted(gap_runs(miss), key=lambda r: r[2] - r[1])
+    only = np.zeros_like(miss)
+    for p, a, b in runs[::7]:
+        only[a:b + 1, p] = True
+    full = baselines.rigid_estimates(gappy, weighted=True, reach=AUTO_REACH)
+    part = baselines.rigid_estimates(gappy, weighted=True, reach=AUTO_REACH, only=only)
+    for got, want in zip(part, full):
+        np.testing.assert_array_equal(got[only], want[only])
+    assert np.isnan(part[0][miss & ~only]).all() and np.isnan(part[1][miss & ~only]).all()
 
 
 @pytest.mark.parametrize("frames", [60, 180])
