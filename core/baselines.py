@@ -38,7 +38,8 @@ from .posing import best_rotation
 RIGID_DONORS = 3
 #: metres added (in quadrature) to the donors' spread when two rigid estimates are weighed
 SPREAD_FLOOR = 0.005
-#: frames (times donors) the search for a gap's nearest references looks at in one batch
+#: (gap, donor set) pairs times frames that the search for the gaps' nearest references looks at
+#: in one batch
 NEAREST_CHUNK = 1 << 20
 
 
@@ -281,8 +282,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
         after &= far > 0
         both = np.concatenate([np.zeros((1, len(order)), int),
                                np.cumsum(seen[:, order] & seen[:, p:p + 1], axis=0)])
-        allowed = before | after
-        allowed = np.broadcast_to(allowed[:, None], (len(a), len(order))).copy()
+        allowed = np.repeat((before | after)[:, None], len(order), axis=1)
         lo = np.maximum(0, a - far)
         allowed[before] &= both[a[before]] > both[lo[before]]
         hi = np.minimum(frames, b + 1 + far)
