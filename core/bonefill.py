@@ -17,6 +17,11 @@ frames:
   across the gap from what meets the keys at either end. Needs a knowledge base built from
   armature takes of the same skeleton (``KnowledgeBase.turns``). The take itself is searched
   too, wherever it keys the bones a stretch lacks;
+- ``regress``: what the rest of the body says of the bone: a ridge regression of its channels on
+  the channels of the bones keyed throughout the gap (their motion a tenth of a second either
+  side too), fitted on the frames within two seconds of the gap where the take keys them all
+  (:func:`~.rig.regress_channels`); the same subject, the same moment of the take, no knowledge
+  base;
 - ``knn``: the knowledge base's joint positions near ``hermite``: the local models of
   :mod:`.recover`, fitted to the K nearest poses over every joint, pull the joints the gaps
   move towards likely poses, the more the further a frame lies from a key
@@ -24,9 +29,11 @@ frames:
   top-down, each gapped bone takes the rotation that best carries its rigid subtree - its
   descendants posed by their own keys - onto those joints (:func:`carry_subtrees`);
 - ``auto`` (the default): per gap ``match``, ``mix`` (a quarter of the way from ``hermite`` to
-  ``match``)
-  or ``interp``, as copies of the gap - same bone, same length, placed where the bone is
-  keyed - refilled by each say (:meth:`_Job.auto`); with a knowledge base of positions only,
+  ``match``), ``stack`` (``interp``, ``hermite``, ``match`` and ``regress`` weighed together
+  frame by frame, by the frame's distance from the keys: :mod:`.stacking`, the weights that
+  refill the take's copies best) or ``interp``, as copies of the gap - same bone, same length,
+  placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); with a knowledge
+  base of positions only,
   ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees carried onto
   the knowledge base's guess from the known joints alone: a KB that holds the motion) stand in;
 - ``slerp``: quaternion slerp between the rotations at the keys either side;
@@ -47,21 +54,32 @@ from .motion import Motion, blend_into_gaps, gap_runs, skeleton_limbs, widened
 from .posing import best_rotation, child_handles, forward, order_bones, rotation_between, \
     solve_pose, tail_handles
 from .rig import aligned_turns, basis_matrices, basis_turns, hermite_channels, \
-    interpolate_channels
+    interpolate_channels, regress_channels
+from . import stacking
 
-BONE_METHODS = ("auto", "knn", "match", "interp", "hermite", "slerp", "positions")
+BONE_METHODS = ("auto", "knn", "match", "regress", "interp", "hermite", "slerp", "positions")
 #: the methods that are not the project's own (``interp`` is Blender's own interpolation)
 BONE_BASELINES = ("interp", "hermite", "slerp")
 #: every candidate a gap can take (``half``: half-way from ``interp`` to ``knn``; ``recall``:
 #: the subtree carried onto the knowledge base's guess from the known joints alone; ``mix``:
 #: :data:`MIX_SHARE` of the way from ``hermite`` to ``match``)
-CANDIDATES = ("interp", "hermite", "knn", "half", "recall", "match", "mix")
+CANDIDATES = ("interp", "hermite", "knn", "half", "recall", "match", "mix", "regress")
 #: what ``auto`` chooses from beside ``interp``: with a knowledge base of bone rotations, and
 #: without one (built from positions alone, or by an older version)
 AUTO_CANDIDATES = ("match", "mix")
 #: how far ``mix`` goes from ``hermite`` towards ``match`` (tuned, docs/METHOD_NOTES.md)
 MIX_SHARE = 0.25
 AUTO_POSITIONS = ("knn", "half", "recall")
+#: the fills ``auto``'s ``stack`` weighs together frame by frame where the knowledge base holds
+#: bone rotations and the take has copies of its gaps, and how strongly its weights are drawn
+#: towards equal ones (tuned, docs/METHOD_NOTES.md)
+STACK_FILLS = ("interp", "hermite", "match", "regress")
+STACK_RIDGE = 0.3
+#: ``regress``: the other bones' channels this many seconds either side count too; fitted within
+#: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
+REGRESS_LAGS = (0.05, 0.1)
+REGRESS_WINDOW = 2.0
+REGRESS_RIDGE = 0.1
 NEEDS_KB = ("auto", "knn", "match", "positions")
 #: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
 #: of interpolation's (the better candidate where both are), on gaps of :data:`LONG_GAP`
@@ -156,6 +174,8 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
         return _slerp(seen, gaps, moves)
     if method == "hermite":
         return job.hermite(channels, location, gaps)
+    if method == "regress":
+        return job.regress(channels, location, gaps)
     if method == "positions":
         return job.positions(seen, job.for_kb(gaps))
     if method == "knn":
@@ -371,9 +391,17 @@ class _Job:
         return basis_matrices(self.rig, hermite_channels(channels, gaps, damping),
                               hermite_channels(location, moving, damping))
 
+    def regress(self, channels, location, gaps):
+        """Each gapped bone (not a root) as the rest of the body says (``regress``)."""
+        return basis_matrices(self.rig, regress_channels(
+            channels, gaps, self.fps, REGRESS_LAGS, REGRESS_WINDOW, REGRESS_RIDGE,
+            fixed=self.rig.roots), location)
+
     def candidates(self, channels, location, gaps, names):
         """Basis matrices of the named candidates (of :data:`CANDIDATES`) for these gaps."""
         out = {"interp": basis_matrices(self.rig, channels, location)}
+        if "regress" in names:
+            out["regress"] = self.regress(channels, location, gaps)
         fillable = self.for_kb(gaps)
         if {"hermite", "knn", "half", "mix"} & set(names):
             out["hermite"] = self.hermite(channels, location, gaps)
@@ -391,8 +419,9 @@ class _Job:
         return {name: basis for name, basis in out.items() if name in names}
 
     def auto(self, channels, location, gaps):
-        """Per gap, the candidate (:data:`AUTO_CANDIDATES`, or :data:`AUTO_POSITIONS` where the
-        knowledge base holds no bone rotations) and the share of the way to it from
+        """Per gap, the candidate (:data:`AUTO_CANDIDATES` and ``stack``, or
+        :data:`AUTO_POSITIONS` where the knowledge base holds no bone rotations) and the share
+        of the way to it from
         interpolation (:data:`AUTO_SHARES`) that refill copies of the gap - same bone, same
         length, where the bone is keyed - best, if they do so below :data:`PROMOTE` of
         interpolation's error (short gaps: :data:`PROMOTE_SHORT`, all the way only below
@@ -407,6 +436,7 @@ class _Job:
                         "with 'kb build' from BVH or ASF/AMC takes for the rotation fill")
         names = AUTO_CANDIDATES if rotations else AUTO_POSITIONS
         copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
+        stack = rotations and bool(copies)  # the weights come from the copies
         runs = gap_runs(gaps)
         choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps else names[1],
                    1.0) for _, a, e in runs]
@@ -417,8 +447,15 @@ class _Job:
             hidden = interpolate_channels(channels, probe)
             hidden_loc = np.where((probe & self.moves)[..., None],
                                   interpolate_channels(location, probe), location)
-            tried = self.candidates(hidden, hidden_loc, gaps | probe, ("interp",) + names)
+            tried = self.candidates(hidden, hidden_loc, gaps | probe,
+                                    ("interp",) + names + (STACK_FILLS if stack else ()))
             truth = self.world(seen)
+            if stack:  # each copy stacked with weights its own gap's copies had no part in
+                table, alone = self._stack_tables(tried, truth, copies)
+                of_copy = {(b, start): alone[i] for i, b, start, _ in copies}
+                tried["stack"] = self._stacked(tried, gaps | probe,
+                                               lambda b, a: of_copy.get((b, a), table))
+                names = names + ("stack",)
             base = self._errors(tried["interp"], truth, copies)
             # log error ratio to interpolation per copy (1 mm^2 per joint and frame keeps still
             # bones at 0); per gap the mean over its copies, shrunk towards the take's mean
@@ -451,12 +488,48 @@ class _Job:
             wanted[a:e + 1, b] = name != "interp"
         if not wanted.any():
             return seen
-        made = self.candidates(channels, location, wanted, {name for name, _ in choice})
+        chosen = {name for name, _ in choice}
+        made = self.candidates(channels, location, wanted,
+                               chosen | (set(STACK_FILLS) if "stack" in chosen else set()))
+        if "stack" in chosen:
+            made["stack"] = self._stacked(made, wanted, lambda b, a: table)
         out = seen.copy()
         for (b, a, e), (name, share) in zip(runs, choice):
             if name != "interp":
                 out[a:e + 1, b] = halfway(seen[a:e + 1, b:b + 1], made[name][a:e + 1, b:b + 1],
                                           np.ones((e - a + 1, 1), bool), share)[:, 0]
+        return out
+
+    def _stack_tables(self, made, truth, copies):
+        """The ``stack`` weights (:func:`~.stacking.weights`) the copies' errors give for the
+        fills of :data:`STACK_FILLS`: over every copy, and per gap (index) over the copies of
+        the other gaps."""
+        worlds = [self.world(made[name]) for name in STACK_FILLS]
+        per_gap, total = {}, (0.0, 0.0)
+        for i, b, start, length in copies:
+            joints, span = self.moved_by(b), slice(start, start + length)
+            moments = stacking.moments(
+                [world[span, joints] - truth[span, joints] for world in worlds], self.fps)
+            per_gap[i] = tuple(a + m for a, m in zip(per_gap.get(i, (0.0, 0.0)), moments))
+            total = tuple(a + m for a, m in zip(total, moments))
+        table = stacking.weights(*total, STACK_RIDGE)
+        return table, {i: stacking.weights(total[0] - sums, total[1] - counts, STACK_RIDGE)
+                       for i, (sums, counts) in per_gap.items()}
+
+    def _stacked(self, made, mask, table_of):
+        """``stack``: on each run of ``mask`` the fills of :data:`STACK_FILLS` weighed together
+        frame by frame (rotations about ``interp``'s, locations on the line), the weights from
+        ``table_of(bone, first frame of the run)``."""
+        out = made["interp"].copy()
+        for b, a, e in gap_runs(mask):
+            w = stacking.frame_weights(table_of(b, a), e - a + 1, self.fps)
+            base = Rotation.from_matrix(out[a:e + 1, b, :3, :3])
+            turn = sum(w[:, k:k + 1] * (Rotation.from_matrix(made[name][a:e + 1, b, :3, :3])
+                                        * base.inv()).as_rotvec()
+                       for k, name in enumerate(STACK_FILLS))
+            out[a:e + 1, b, :3, :3] = (Rotation.from_rotvec(turn) * base).as_matrix()
+            out[a:e + 1, b, :3, 3] = sum(w[:, k:k + 1] * made[name][a:e + 1, b, :3, 3]
+                                         for k, name in enumerate(STACK_FILLS))
         return out
 
     def _errors(self, basis, truth, copies):

@@ -349,7 +349,8 @@ def build_parser(extra=None):
                    help="shortgaps: dropouts of 3-24 frames; "
                         "realgaps: the gaps of real captures (--gap-sources) on complete takes; "
                         "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
-                        "rate; methods auto, knn, interp, slerp, positions")
+                        "rate; methods auto, knn, match, regress, interp, hermite, slerp, "
+                        "positions")
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")
     p.add_argument("--kb-sources", nargs="+", default=[], metavar="PATH",
                    help="knowledge-base files/folders (the test subject is left out)")

@@ -320,6 +320,51 @@ def hermite_channels(values, gaps, damping=None):
     return out
 
 
+def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None):
+    """Like :func:`interpolate_channels`, but each gap with a key on both sides takes what the
+    rest of the body says of the bone: a ridge regression of its channels on the channels of
+    every bone keyed throughout the gap (at the frame and ``lags`` seconds either side, so the
+    other bones' motion counts, not only their pose), fitted on the frames within ``window``
+    seconds of the gap where the bone and all of those are keyed; the regression's miss at the
+    keys either side is interpolated across the gap, so the fill meets both keys. ``ridge``:
+    the penalty per training frame on standardised channels. ``fixed`` ((bones,) bool): bones
+    left as interpolated (roots). A gap with too few training frames stays linear."""
+    out = interpolate_channels(values, gaps)
+    frames, bones, width = out.shape
+    steps = sorted({0} | {s * int(round(abs(t) * fps)) for t in lags for s in (-1, 1)})
+    reach = int(round(window * fps))
+    enough = max(10, int(round(0.25 * fps)))
+    for b in np.flatnonzero(gaps.any(axis=0) & (True if fixed is None else ~np.asarray(fixed))):
+        for a, e in _runs(gaps[:, b]):
+            if a < 1 or e > frames - 2:
+                continue
+            others = ~gaps[max(0, a - 1):e + 2].any(axis=0)
+            others[b] = False
+            lo, hi = max(0, a - reach), min(frames, e + 1 + reach)
+            rows = np.arange(lo, hi)
+            train = ~gaps[lo:hi, b] & ~gaps[lo:hi][:, others].any(axis=1)
+            if train.sum() < enough:
+                continue
+            x = np.concatenate([out[np.clip(rows + step, 0, frames - 1)][:, others]
+                                .reshape(len(rows), -1) for step in steps], axis=1)
+            x = x[:, x[train].std(axis=0) > 1e-9]
+            mean, scale = x[train].mean(axis=0), x[train].std(axis=0)
+            x = (x - mean) / scale
+            y = out[rows, b]
+            centre = y[train].mean(axis=0)
+            # ridge in its dual form: fewer training frames than features
+            xt = x[train]
+            gram = xt @ xt.T + ridge * len(xt) * np.eye(len(xt))
+            pred = x @ (xt.T @ np.linalg.solve(gram, y[train] - centre)) + centre
+            miss = y - pred  # known at the keys either side of the gap
+            span = np.arange(a, e + 1)
+            ends = np.array([a - 1, e + 1])
+            for k in range(width):
+                out[a:e + 1, b, k] = pred[span - lo, k] + np.interp(span, ends,
+                                                                     miss[ends - lo, k])
+    return out
+
+
 def _runs(mask):
     edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
     return zip(edges[::2], edges[1::2] - 1)

@@ -3,9 +3,9 @@
 A 3,000-frame take (CMU 13_18 boxing, Daz-friendly BVH, 120 fps, read as Blender's importer
 builds it) with 10 bone gaps of 30-120 frames on limb and spine bones; knowledge base: every
 other Daz-friendly subject at 60 fps (about 48k poses, with bone rotations). Times the default
-fill (``auto``: copies of each gap refilled by ``match`` and ``mix``, then the chosen one on the
-gaps), ``match`` alone and ``knn`` alone, with ``slerp`` in the same run as the baseline (what
-interpolating costs).
+fill (``auto``: copies of each gap refilled by ``match``, ``mix`` and ``stack``, then the chosen
+one on the gaps), ``match``, ``regress`` and ``knn`` alone, with ``slerp`` in the same run as the
+baseline (what interpolating costs).
 
 Usage: OMP_NUM_THREADS=2 .venv/bin/python tools/bench_bones.py [--repeat 3]
 """
@@ -48,7 +48,7 @@ def main():
     print(f"take: {len(channels)} frames, {len(rig.names)} bones, {int(gaps.sum())} gap frames "
           f"on {len(bones)} gaps; KB {kb.size} poses")
     times = {}
-    for method in ("slerp", "match", "knn", "auto"):
+    for method in ("slerp", "regress", "match", "knn", "auto"):
         runs = []
         for _ in range(args.repeat):
             start = time.perf_counter()
