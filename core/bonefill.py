@@ -173,16 +173,16 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     if method == "slerp":
         return _slerp(seen, gaps, moves)
     if method == "hermite":
-        return job.hermite(channels, location, gaps)
+        return job.hermite(channels, location, gaps, seen)
     if method == "regress":
-        return job.regress(channels, location, gaps)
+        return job.regress(channels, location, gaps, seen)
     if method == "positions":
         return job.positions(seen, job.for_kb(gaps))
     if method == "knn":
-        return job.knn(job.hermite(channels, location, gaps), job.for_kb(gaps))
+        return job.knn(job.hermite(channels, location, gaps, seen), job.for_kb(gaps))
     if method == "match":
         return job.match(seen, job.for_kb(gaps))
-    return job.auto(channels, location, gaps)
+    return job.auto(channels, location, gaps, seen)
 
 
 class _Job:
@@ -385,26 +385,30 @@ class _Job:
                         "not where the body goes)")
         return gaps & ~roots
 
-    def hermite(self, channels, location, gaps):
+    def hermite(self, channels, location, gaps, base):
+        """``hermite``'s basis matrices; ``base``: those of ``channels`` and ``location``."""
         moving = gaps & self.moves
         damping = HERMITE_SECONDS * self.fps
         return basis_matrices(self.rig, hermite_channels(channels, gaps, damping),
-                              hermite_channels(location, moving, damping))
+                              hermite_channels(location, moving, damping), base,
+                              gaps.any(axis=0))
 
-    def regress(self, channels, location, gaps):
+    def regress(self, channels, location, gaps, base):
         """Each gapped bone (not a root) as the rest of the body says (``regress``)."""
         return basis_matrices(self.rig, regress_channels(
             channels, gaps, self.fps, REGRESS_LAGS, REGRESS_WINDOW, REGRESS_RIDGE,
-            fixed=self.rig.roots), location)
+            fixed=self.rig.roots), location, base, gaps.any(axis=0))
 
-    def candidates(self, channels, location, gaps, names):
-        """Basis matrices of the named candidates (of :data:`CANDIDATES`) for these gaps."""
-        out = {"interp": basis_matrices(self.rig, channels, location)}
+    def candidates(self, channels, location, gaps, names, base):
+        """Basis matrices of the named candidates (of :data:`CANDIDATES`) for these gaps;
+        ``base``: basis matrices that differ from the channels' only on the gapped bones."""
+        interp = basis_matrices(self.rig, channels, location, base, gaps.any(axis=0))
+        out = {"interp": interp}
         if "regress" in names:
-            out["regress"] = self.regress(channels, location, gaps)
+            out["regress"] = self.regress(channels, location, gaps, interp)
         fillable = self.for_kb(gaps)
         if {"hermite", "knn", "half", "mix"} & set(names):
-            out["hermite"] = self.hermite(channels, location, gaps)
+            out["hermite"] = self.hermite(channels, location, gaps, interp)
         if {"knn", "half"} & set(names):
             out["knn"] = self.knn(out["hermite"], fillable)
             out["half"] = halfway(out["interp"], out["knn"], gaps)
@@ -418,7 +422,7 @@ class _Job:
                                            self.below, stay=0.0)
         return {name: basis for name, basis in out.items() if name in names}
 
-    def auto(self, channels, location, gaps):
+    def auto(self, channels, location, gaps, seen):
         """Per gap, the candidate (:data:`AUTO_CANDIDATES` and ``stack``, or
         :data:`AUTO_POSITIONS` where the knowledge base holds no bone rotations) and the share
         of the way to it from
@@ -428,7 +432,6 @@ class _Job:
         :data:`PROMOTE_SHORT_WHOLE`); interpolation otherwise. A gap without copies is scored on the
         take's copies of other gaps; a take without any takes ``match`` on gaps of
         :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all)."""
-        seen = basis_matrices(self.rig, channels, location)
         rotations = self.kb.turns is not None
         if not rotations:
             self.report("auto: the knowledge base holds no bone rotations (built from markers "
@@ -448,7 +451,7 @@ class _Job:
             hidden_loc = np.where((probe & self.moves)[..., None],
                                   interpolate_channels(location, probe), location)
             tried = self.candidates(hidden, hidden_loc, gaps | probe,
-                                    ("interp",) + names + (STACK_FILLS if stack else ()))
+                                    ("interp",) + names + (STACK_FILLS if stack else ()), seen)
             truth = self.world(seen)
             if stack:  # each copy stacked with weights its own gap's copies had no part in
                 table, alone = self._stack_tables(tried, truth, copies)
@@ -490,7 +493,7 @@ class _Job:
             return seen
         chosen = {name for name, _ in choice}
         made = self.candidates(channels, location, wanted,
-                               chosen | (set(STACK_FILLS) if "stack" in chosen else set()))
+                               chosen | (set(STACK_FILLS) if "stack" in chosen else set()), seen)
         if "stack" in chosen:
             made["stack"] = self._stacked(made, wanted, lambda b, a: table)
         out = seen.copy()
@@ -504,12 +507,12 @@ class _Job:
         """The ``stack`` weights (:func:`~.stacking.weights`) the copies' errors give for the
         fills of :data:`STACK_FILLS`: over every copy, and per gap (index) over the copies of
         the other gaps."""
-        worlds = [self.world(made[name]) for name in STACK_FILLS]
+        worlds = [self._spans(made[name], copies) for name in STACK_FILLS]
         per_gap, total = {}, (0.0, 0.0)
-        for i, b, start, length in copies:
+        for k, (i, b, start, length) in enumerate(copies):
             joints, span = self.moved_by(b), slice(start, start + length)
             moments = stacking.moments(
-                [world[span, joints] - truth[span, joints] for world in worlds], self.fps)
+                [world[k][:, joints] - truth[span, joints] for world in worlds], self.fps)
             per_gap[i] = tuple(a + m for a, m in zip(per_gap.get(i, (0.0, 0.0)), moments))
             total = tuple(a + m for a, m in zip(total, moments))
         table = stacking.weights(*total, STACK_RIDGE)
@@ -534,13 +537,20 @@ class _Job:
 
     def _errors(self, basis, truth, copies):
         """Squared joint error (metres^2, summed) of each copy: the joints its bone moves."""
-        world = self.world(basis)
         out = np.empty(len(copies))
-        for i, (_, b, start, length) in enumerate(copies):
+        for i, (world, (_, b, start, length)) in enumerate(zip(self._spans(basis, copies),
+                                                               copies)):
             joints = self.moved_by(b)
-            diff = world[start:start + length, joints] - truth[start:start + length, joints]
-            out[i] = np.nansum(diff ** 2)
+            out[i] = np.nansum((world[:, joints] - truth[start:start + length, joints]) ** 2)
         return out
+
+    def _spans(self, basis, copies):
+        """The world joints of ``basis`` on each copy's frames (posed on those frames only)."""
+        rows = np.unique(np.concatenate([np.arange(c[2], c[2] + c[3]) for c in copies]
+                                        or [np.zeros(0, int)]))
+        world = self.world(basis[rows])
+        first = np.searchsorted(rows, [c[2] for c in copies])
+        return [world[f:f + c[3]] for f, c in zip(first, copies)]
 
 
 def carry_subtrees(rig, basis, gaps, targets, moves, below=None, stay=STAY):

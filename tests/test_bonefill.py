@@ -52,6 +52,20 @@ def test_channels_round_trip_continuously(walk):
     assert (np.sum(quat[1:] * quat[:-1], axis=2) > 0).all()  # one hemisphere: no sign flips
 
 
+def test_basis_of_the_changed_bones_alone_is_the_whole_basis(walk):
+    """The fills pose only the bones they change on top of the keys' basis: the same numbers
+    as posing every bone (the root's location changed too)."""
+    rig, channels, location, _ = walk
+    gaps = np.zeros(channels.shape[:2], bool)
+    gaps[50:90, [0, rig.names.index("lShin"), rig.names.index("chest")]] = True
+    changed, moved = hermite_channels(channels, gaps, 30), hermite_channels(location, gaps, 30)
+    whole = basis_matrices(rig, changed, moved)
+    part = basis_matrices(rig, changed, moved, basis_matrices(rig, channels, location),
+                          gaps.any(axis=0))
+    assert not np.array_equal(whole, basis_matrices(rig, channels, location))
+    assert np.array_equal(part, whole)
+
+
 def test_interpolated_channels_keep_keys_and_hold_at_clip_ends():
     values = np.arange(10.0)[:, None, None] * np.ones((1, 2, 3))
     gaps = np.zeros((10, 2), bool)

@@ -91,9 +91,10 @@ def main(out, names=CANDIDATES):
                      "copy_joints": np.array([job.below[c[1]].sum() for c in copies], int),
                      "gap_len": np.array([e - a + 1 for _, a, e in runs], int),
                      "gap_joints": np.array([job.below[b].sum() for b, _, _ in runs], int)}
+            base = basis_matrices(rig, seen, location)
             on_copies = job.candidates(interpolate_channels(seen, probe), location,
-                                       gaps | probe, names)
-            on_gaps = job.candidates(seen, location, gaps, names)
+                                       gaps | probe, names, base)
+            on_gaps = job.candidates(seen, location, gaps, names, base)
             listed = [(i, b, a, e - a + 1) for i, (b, a, e) in enumerate(runs)]
             for where, made, mask, where_copies in (("copy", on_copies, gaps | probe, copies),
                                                     ("gap", on_gaps, gaps, listed)):
