@@ -178,19 +178,15 @@ def basis_matrices(rig, channels, location, base=None, bones=None):
     """Basis matrices (frames, bones, 4, 4) from rotation and location channels. With ``base``
     (basis matrices of channels that differ only on ``bones``, (bones,) bool) only those bones
     are computed, the others copied from it."""
-    if base is not None:
+    if base is None:
+        basis = np.zeros((channels.shape[0], len(rig.names), 4, 4))
+        basis[..., 3, 3] = 1.0
+        cols = np.arange(len(rig.names))
+    else:
         basis = np.array(base, dtype=float)
         cols = np.flatnonzero(bones)
-        part = basis[:, cols]
-        part[..., :3, :3] = rotations(channels[:, cols], [rig.modes[c] for c in cols])
-        part[..., :3, 3] = location[:, cols]
-        basis[:, cols] = part
-        return basis
-    frames = channels.shape[0]
-    basis = np.zeros((frames, len(rig.names), 4, 4))
-    basis[..., :3, :3] = rotations(channels, rig.modes)
-    basis[..., :3, 3] = location
-    basis[..., 3, 3] = 1.0
+    basis[:, cols, :3, :3] = rotations(channels[:, cols], [rig.modes[c] for c in cols])
+    basis[:, cols, :3, 3:] = location[:, cols, :, None]
     return basis
 
 

@@ -189,7 +189,6 @@ def test_hermite_follows_the_velocities_at_the_keys():
     assert np.all(np.abs(v0) < 0.5)  # leaves the key far slower than the motion did
 
 
-
 def test_regression_on_the_rest_of_the_body_fills_a_limb_it_moves_with(data_dir, walk):
     """Walk 02_05: the right shin, then the chest, loses its keys for 1 s in every 4 s. The
     other bones' channels (and their motion a tenth of a second either side) say where the
