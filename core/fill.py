@@ -52,6 +52,13 @@ AUTO_SPLINE_SECONDS = 0.2
 AUTO_SPLINE_COPIES = 4
 AUTO_SPLINE_MARGIN = 10
 AUTO_SPLINE_REACH = 4
+#: longer gaps lean towards the same spline near their ends (:func:`_with_spline_ends`), by a
+#: weight per distance from the nearer end: the least-squares share of the copies' frames at that
+#: distance (shrunk towards none by this ridge), never rising with the distance, none below
+#: ``AUTO_ENDS_LEAST`` or where fewer than ``AUTO_ENDS_SAMPLES`` copied frames lie that far in
+AUTO_ENDS_RIDGE = 0.5
+AUTO_ENDS_LEAST = 0.1
+AUTO_ENDS_SAMPLES = 20
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
@@ -252,9 +259,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     if probe.any():
         if long.any():
             knn_copies = _with_windows(knn_copies, matched, windows)
+        copies = _blend(knn_copies, on_copies, weight)
         with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
-            per_sample = on_copies_of(_blend(knn_copies, on_copies, weight)) / probe.sum(axis=0)
-        out = _with_spline(motion, out, per_sample, weight == 0,
+            per_sample = on_copies_of(copies) / probe.sum(axis=0)
+        spline = baselines.fill_spline(motion.positions)
+        out = _with_spline_ends(motion, out, copies, probe, spline, weight == 0, report)
+        out = _with_spline(motion, out, spline, per_sample, weight == 0,
                            lambda hidden: carried(motion.replace(positions=np.where(
                                hidden[..., None], np.nan, motion.positions)), hidden)[0], report)
     gappy = missing.any(axis=0)
@@ -285,15 +295,82 @@ def _blend(kb, rigid, weight):
     return out
 
 
-def _with_spline(motion, out, e_out, rigid_alone, rigid_of, report):
+def _with_spline_ends(motion, out, copies, probe, spline, rigid_alone, report):
+    """``out`` with the frames of its gaps longer than :data:`AUTO_SPLINE_SECONDS` blended
+    towards ``spline`` (a cubic spline of each point through the take) near their ends.
+
+    Next to a gap's end a point carries on along a smooth curve: one frame in, the spline through
+    the take misses by a millimetre or two, while the knowledge base's and the rigid estimates,
+    which meet the observations only through an offset, jump by 10-20 mm there (and miss by more
+    with every frame). The spline's error grows fast with the distance from the ends, so its
+    share is a weight per distance class (:func:`~.stacking.classes`): the least-squares share
+    of the spline against ``copies`` (the same estimate made for the copies ``probe`` of the
+    gaps) on the copies' frames at that distance, ridge :data:`AUTO_ENDS_RIDGE` towards none,
+    never rising with the distance, none below :data:`AUTO_ENDS_LEAST` or where too few copied
+    frames lie that far in. Points carried by their rigid partners alone (``rigid_alone``) and
+    the others get weights of their own. Only gaps with both ends in the take, of points with a
+    copy as long as the gap, take part: copies shorter than the gap (a limb gone for half the
+    take) do not show how a spline strays over it."""
+    from .stacking import DISTANCES, classes
+
+    shortest = round(AUTO_SPLINE_SECONDS * motion.fps)
+    hidden_spline = baselines.fill_spline(np.where(probe[..., None], np.nan, motion.positions))
+    sums = np.zeros((3, 2, len(DISTANCES)))  # spline-minus-estimate times error, its square, frames
+    longest = np.zeros(motion.n_points, dtype=int)
+    for p, a, b in gap_runs(probe):
+        longest[p] = max(longest[p], b - a + 1)
+        if b - a + 1 <= shortest:
+            continue
+        near, _ = classes(b - a + 1, motion.fps)
+        lean = hidden_spline[a:b + 1, p] - copies[a:b + 1, p]
+        error = motion.positions[a:b + 1, p] - copies[a:b + 1, p]
+        ok = np.isfinite(lean).all(axis=1) & np.isfinite(error).all(axis=1)
+        for k, value in enumerate(((lean * error).sum(axis=1), (lean * lean).sum(axis=1),
+                                   np.ones(len(lean)))):
+            np.add.at(sums[k, int(rigid_alone[p])], near[ok], value[ok])
+    table = np.zeros((2, len(DISTANCES)))
+    for c in range(2):
+        product, square, frames = sums[:, c]
+        enough = np.flatnonzero(frames >= AUTO_ENDS_SAMPLES)
+        if not len(enough):
+            continue
+        # classes nearer than any frame at this rate take the first one's weight; from the first
+        # class after it without enough copied frames on, none
+        short = np.flatnonzero((frames < AUTO_ENDS_SAMPLES)
+                               & (np.arange(len(frames)) > enough[0]))
+        stop = short[0] if len(short) else len(frames)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = np.clip(np.nan_to_num(product / (square * (1 + AUTO_ENDS_RIDGE))), 0, 1)
+        w[:enough[0]] = w[enough[0]]
+        w[stop:] = 0.0
+        w = np.minimum.accumulate(w)
+        table[c] = np.where(w < AUTO_ENDS_LEAST, 0.0, w)
+    out = out.copy()
+    leaned = 0
+    for p, a, b in gap_runs(motion.missing):
+        if (a == 0 or b == len(out) - 1 or b - a + 1 <= shortest or longest[p] < b - a + 1
+                or not table[int(rigid_alone[p])].any()):
+            continue
+        near, _ = classes(b - a + 1, motion.fps)
+        share = table[int(rigid_alone[p])][near][:, None]
+        lean = spline[a:b + 1, p] - out[a:b + 1, p]
+        out[a:b + 1, p] += np.where(np.isfinite(lean), share * lean, 0.0)
+        leaned += 1
+    if leaned:
+        report(f"auto: {leaned} gaps lean towards a spline through the take near their ends "
+               f"(up to {table.max():.0%} at the nearest frames)")
+    return out
+
+
+def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     """``out`` with each gap blended towards a cubic spline of its point through the take
     (:func:`~.baselines.fill_spline`) by inverse errors per sample: the spline's on up to
     :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
     frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; not
     finite where it has none) or, where ``rigid_alone`` says the rigid estimate fills the point
     alone, that estimate's (``rigid_of(hidden)``: it on the samples ``hidden`` with those
-    hidden) on the spline's copies. Over a few frames a point moves along a smooth curve that the spline follows within
-    a millimetre, closer than any estimate carried from other points; over longer gaps its
+    hidden) on the spline's copies; ``spline`` is that spline of the take. Over a few frames a
+    point moves along a smooth curve that the spline follows within a millimetre, closer than any estimate carried from other points; over longer gaps its
     error grows fast, with a tail its copies do not foresee, so only gaps of up to
     :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline across them) and
     points without a finite ``e_out`` keep ``out``."""
@@ -321,7 +398,6 @@ def _with_spline(motion, out, e_out, rigid_alone, rigid_of, report):
     error = [np.sum((fill_spline(np.where(hidden[..., None], np.nan, motion.positions))
                      - motion.positions) ** 2, axis=2) if hidden.any() else None
              for hidden in rounds]
-    spline = fill_spline(motion.positions)
     # where the rigid estimate alone fills a point, it is scored on the spline's own copies
     if rigid_alone[[p for p, _, _, _ in copies]].any():
         rigid_error = [np.sum((rigid_of(hidden) - motion.positions) ** 2, axis=2)
