@@ -41,7 +41,10 @@ AUTO_SPREAD_CAP = 2.0
 #: windows of motion (:func:`~.matching.fill_match`) beside its per-frame models, the two
 #: weighted by their errors on the point's copies: a limb gone for seconds takes real motion of
 #: a body that moved like this one (on shorter gaps the windows' mean misses the pose the models
-#: fit; on marker sets the windows never refilled the copies better, and cost time)
+#: fit; on marker sets the windows never refilled the copies better, and cost time); and the
+#: take's own regression of the point on the points seen through the gap
+#: (:func:`~.regression.regress_points`), weighted by its errors on the copies (on shorter gaps
+#: and on marker sets it misled the copies: docs/METHOD_NOTES.md, "Session 22")
 AUTO_MATCH_SECONDS = 1.0
 #: gaps of at most this many seconds are also blended with a spline through the take
 #: (:func:`_with_spline`), by its error on up to ``AUTO_SPLINE_COPIES`` copies of each gap, kept
@@ -161,9 +164,11 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     estimate beyond its donors' spread (:data:`AUTO_SPREAD_CAP`). On points with long gaps
     (:data:`AUTO_MATCH_SECONDS`) the knowledge base's estimate is its models' fill and its
     windows of motion (:func:`~.matching.fill_match`) weighted by their errors on the copies,
-    the windows only where they refill them better. Short gaps (:data:`AUTO_SPLINE_SECONDS`)
-    are last blended with a spline through the take by its error on copies of each gap
-    (:func:`_with_spline`).
+    the windows only where they refill them better, and then the take's own regression of the
+    point on the rest of the body (:func:`~.regression.regress_points`), by its error on the
+    copies. Longer gaps lean towards a spline through the take next to their ends
+    (:func:`_with_spline_ends`); short gaps (:data:`AUTO_SPLINE_SECONDS`) are last blended with
+    that spline by its error on copies of each gap (:func:`_with_spline`).
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
@@ -172,6 +177,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     from .baselines import rigid_estimates
     from .matching import fill_match
     from .recover import KnnSettings, fill_knn
+    from .regression import regress_points
 
     report = report or (lambda message: None)
     progress = progress or (lambda fraction, message: None)
@@ -206,6 +212,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         estimates = pool.submit(lambda: (carried(hidden) if probe.any() else (None, None),
                                          carried(motion),
                                          fill_match(hidden, kb, long, stopped).positions
+                                         if long.any() else None,
+                                         regress_points(hidden.positions, motion.names,
+                                                        probe & long[None])
                                          if long.any() else None))
         try:
             # one pass: its only use is to weigh the methods
@@ -216,7 +225,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
-        (on_copies, _), (rigid, spread), matched = estimates.result()
+        (on_copies, _), (rigid, spread), matched, regressed = estimates.result()
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point
     if probe.any():
         def on_copies_of(out):
@@ -236,6 +245,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             with np.errstate(invalid="ignore", divide="ignore"):
                 windows = np.nan_to_num(e_knn / (e_knn + e_match), nan=1.0)  # their share
                 e_kb = 1.0 / (1.0 / e_knn + 1.0 / e_match)
+            # the take's own regression joins the knowledge base's estimate by its error
+            e_own = np.where(long, on_copies_of(regressed), np.inf)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                own = (1.0 / e_own) / (1.0 / e_kb + 1.0 / e_own)  # its share
+                e_kb = 1.0 / (1.0 / e_kb + 1.0 / e_own)
+            own = np.nan_to_num(own)
         with np.errstate(invalid="ignore"):
             share = e_rigid / (e_kb + e_rigid)
         weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
@@ -251,14 +266,18 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     knn = fill_knn(given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
                    should_cancel=should_cancel, report=report).positions
     if long.any() and (windows > 0).any():
-        knn = _with_windows(knn, fill_match(given, kb, windows > 0, should_cancel).positions,
-                            windows)
+        knn = _mix_in(knn, fill_match(given, kb, windows > 0, should_cancel).positions, windows)
         report(f"auto: windows of the knowledge base's motion join its models on "
                f"{int((windows > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
+    if long.any() and (own > 0).any():
+        knn = _mix_in(knn, regress_points(motion.positions, motion.names,
+                                          missing & (own > 0)[None]), own)
+        report(f"auto: the take's own regression on the rest of the body joins on "
+               f"{int((own > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
     out = _blend(knn, rigid, weight)
     if probe.any():
         if long.any():
-            knn_copies = _with_windows(knn_copies, matched, windows)
+            knn_copies = _mix_in(_mix_in(knn_copies, matched, windows), regressed, own)
         copies = _blend(knn_copies, on_copies, weight)
         with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
@@ -276,11 +295,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     return _with_fill(motion, out)
 
 
-def _with_windows(knn, matched, windows):
-    """The models' fill with the windows' (:func:`~.matching.fill_match`) mixed in at each
-    point's share ``windows`` where they have an estimate."""
-    part = np.where(np.isnan(matched[..., :1]), 0.0, windows[None, :, None])
-    return knn * (1 - part) + np.nan_to_num(matched) * part
+def _mix_in(knn, other, share):
+    """The models' fill with another estimate of the knowledge base's share (the windows,
+    :func:`~.matching.fill_match`; the take's own regression,
+    :func:`~.regression.regress_points`) mixed in at each point's ``share`` where it has one."""
+    part = np.where(np.isnan(other[..., :1]), 0.0, share[None, :, None])
+    return knn * (1 - part) + np.nan_to_num(other) * part
 
 
 def _blend(kb, rigid, weight):
@@ -315,7 +335,8 @@ def _with_spline_ends(motion, out, copies, probe, spline, rigid_alone, report):
 
     shortest = round(AUTO_SPLINE_SECONDS * motion.fps)
     hidden_spline = baselines.fill_spline(np.where(probe[..., None], np.nan, motion.positions))
-    sums = np.zeros((3, 2, len(DISTANCES)))  # spline-minus-estimate times error, its square, frames
+    # per class of point and distance: spline-minus-estimate times error, its square, frames
+    sums = np.zeros((3, 2, len(DISTANCES)))
     longest = np.zeros(motion.n_points, dtype=int)
     for p, a, b in gap_runs(probe):
         longest[p] = max(longest[p], b - a + 1)
@@ -370,10 +391,11 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     finite where it has none) or, where ``rigid_alone`` says the rigid estimate fills the point
     alone, that estimate's (``rigid_of(hidden)``: it on the samples ``hidden`` with those
     hidden) on the spline's copies; ``spline`` is that spline of the take. Over a few frames a
-    point moves along a smooth curve that the spline follows within a millimetre, closer than any estimate carried from other points; over longer gaps its
-    error grows fast, with a tail its copies do not foresee, so only gaps of up to
-    :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline across them) and
-    points without a finite ``e_out`` keep ``out``."""
+    point moves along a smooth curve that the spline follows within a millimetre, closer than
+    any estimate carried from other points; over longer gaps its error grows fast, with a tail
+    its copies do not foresee, so only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part.
+    Gaps at the take's ends (no spline across them) and points without a finite ``e_out`` keep
+    ``out``."""
     from .baselines import fill_spline
 
     missing = motion.missing

@@ -1,0 +1,73 @@
+"""A point in a gap from the rest of the body: the take's own regression.
+
+Where a limb is gone for seconds, the points still seen say much about it on this very take:
+a walk's arm swings against its legs, a dancer's free hand follows the rest of the figure. No
+knowledge base holds that subject; the take's own frames where the point is seen do. Per gap, a
+ridge regression (in the body's frame, :mod:`.normalize`) of the point on every point seen
+throughout the gap, fitted on the frames where all of them are seen, predicts the gap; the
+prediction's miss at the observations either side is blended across it
+(:func:`~.motion.blend_into_gaps`), so the fill meets both ends.
+"""
+
+import numpy as np
+
+from .errors import GapFillError
+from .motion import blend_into_gaps, gap_runs, widened
+from .normalize import denormalize, find_reference, frames_of, normalize
+
+#: penalty per training frame on the standardised coordinates
+RIDGE = 0.01
+#: coordinates are standardised by their spread over the training frames, at least this
+#: (metres): a partner that barely moves against the root (the other hip) would otherwise weigh
+#: its every millimetre of error as much as a swinging hand's decimetres
+SCALE_FLOOR = 0.01
+#: predictions are kept within the point's training range, widened by this share on each side
+#: (a body frame carried across a gap of its root can put the features where no training frame
+#: was)
+MARGIN = 0.1
+#: fewest training frames
+LEAST = 20
+
+
+def regress_points(positions, names, only=None):
+    """Positions (frames, points, 3) with each gap (NaN runs) of the points in ``only``
+    ((frames, points) bool: gaps starting there; default every gap) filled by the take's own
+    regression of the point on the points seen throughout it; other samples as given. Gaps
+    without a point seen throughout, with too few training frames, or in a take whose body has
+    no frame stay NaN."""
+    pos = np.asarray(positions, dtype=np.float64)
+    missing = np.isnan(pos[..., 0])
+    try:
+        root, angle = frames_of(pos, find_reference(names))
+    except GapFillError:
+        return pos.copy()
+    local = normalize(pos, root, angle)
+    seen = ~missing
+    n_frames = len(pos)
+    pred = np.full_like(pos, np.nan)
+    wanted = np.zeros_like(missing)
+    for p, a, b in gap_runs(missing):
+        if only is not None and not only[a, p]:
+            continue
+        lo, hi = max(a - 1, 0), min(b + 1, n_frames - 1)
+        partners = seen[lo:hi + 1].all(axis=0)
+        partners[p] = False
+        train = np.flatnonzero(seen[:, p] & seen[:, partners].all(axis=1))
+        if not partners.any() or len(train) < LEAST:
+            continue
+        x = local[:, partners].reshape(n_frames, -1)
+        mean = x[train].mean(axis=0)
+        scale = np.maximum(x[train].std(axis=0), SCALE_FLOOR)
+        xs = (x - mean) / scale
+        y = local[train, p]
+        centre = y.mean(axis=0)
+        gram = xs[train].T @ xs[train] + RIDGE * len(train) * np.eye(xs.shape[1])
+        coef = np.linalg.solve(gram, xs[train].T @ (y - centre))
+        span = np.arange(lo, hi + 1)
+        low, high = y.min(axis=0), y.max(axis=0)
+        pad = MARGIN * (high - low)
+        pred[span, p] = np.clip(xs[span] @ coef + centre, low - pad, high + pad)
+        wanted[a:b + 1, p] = True
+    world = denormalize(pred, root, angle)
+    return blend_into_gaps(np.where(wanted[..., None], np.nan, pos), world, wanted,
+                           widened(wanted))
