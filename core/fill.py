@@ -334,6 +334,10 @@ def _with_spline_ends(motion, out, copies, probe, spline, rigid_alone, report):
     from .stacking import DISTANCES, classes
 
     shortest = round(AUTO_SPLINE_SECONDS * motion.fps)
+    gaps = [(p, a, b) for p, a, b in gap_runs(motion.missing)
+            if a > 0 and b < len(out) - 1 and b - a + 1 > shortest]
+    if not gaps:  # e.g. a take of short dropouts only: no spline of the copies to make
+        return out
     hidden_spline = baselines.fill_spline(np.where(probe[..., None], np.nan, motion.positions))
     # per class of point and distance: spline-minus-estimate times error, its square, frames
     sums = np.zeros((3, 2, len(DISTANCES)))
@@ -368,9 +372,8 @@ def _with_spline_ends(motion, out, copies, probe, spline, rigid_alone, report):
         table[c] = np.where(w < AUTO_ENDS_LEAST, 0.0, w)
     out = out.copy()
     leaned = 0
-    for p, a, b in gap_runs(motion.missing):
-        if (a == 0 or b == len(out) - 1 or b - a + 1 <= shortest or longest[p] < b - a + 1
-                or not table[int(rigid_alone[p])].any()):
+    for p, a, b in gaps:
+        if longest[p] < b - a + 1 or not table[int(rigid_alone[p])].any():
             continue
         near, _ = classes(b - a + 1, motion.fps)
         share = table[int(rigid_alone[p])][near][:, None]
