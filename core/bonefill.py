@@ -32,9 +32,10 @@ frames:
   ``match``), ``stack`` (``interp``, ``hermite``, ``match`` and ``regress`` weighed together
   frame by frame, by the frame's distance from the keys: :mod:`.stacking`, the weights that
   refill the take's copies best) or ``interp``, as copies of the gap - same bone, same length,
-  placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); with a knowledge
-  base of positions only,
-  ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees carried onto
+  placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
+  ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
+  ``regress`` on the pose alone beside); that and the shorter gaps go from ``interp`` towards
+  their fill only as far as the fills agree on the gap; with a knowledge base of positions only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees carried onto
   the knowledge base's guess from the known joints alone: a KB that holds the motion) stand in;
 - ``slerp``: quaternion slerp between the rotations at the keys either side;
 - ``positions``: the position-space fill of every joint below a gap, then each gapped bone turned
@@ -63,7 +64,8 @@ BONE_BASELINES = ("interp", "hermite", "slerp")
 #: every candidate a gap can take (``half``: half-way from ``interp`` to ``knn``; ``recall``:
 #: the subtree carried onto the knowledge base's guess from the known joints alone; ``mix``:
 #: :data:`MIX_SHARE` of the way from ``hermite`` to ``match``)
-CANDIDATES = ("interp", "hermite", "knn", "half", "recall", "match", "mix", "regress")
+CANDIDATES = ("interp", "hermite", "knn", "half", "recall", "match", "mix", "regress",
+              "regress_pose")
 #: what ``auto`` chooses from beside ``interp``: with a knowledge base of bone rotations, and
 #: without one (built from positions alone, or by an older version)
 AUTO_CANDIDATES = ("match", "mix")
@@ -75,6 +77,17 @@ AUTO_POSITIONS = ("knn", "half", "recall")
 #: towards equal ones (tuned, docs/METHOD_NOTES.md)
 STACK_FILLS = ("interp", "hermite", "match", "regress")
 STACK_RIDGE = 0.3
+#: gaps of this many seconds or more for which no candidate passes on the copies take
+#: ``stack_long`` rather than ``interp``: :data:`LONG_STACK_FILLS` weighed together like
+#: ``stack`` (``regress_pose``: ``regress`` on the other bones' pose at the frame alone)
+#: (tuned, docs/METHOD_NOTES.md)
+LONG_STACK = 0.75
+LONG_STACK_FILLS = STACK_FILLS + ("regress_pose",)
+#: where the take has copies, ``stack_long`` and every gap shorter than :data:`LONG_STACK` go
+#: from ``interp`` towards the chosen fill only as far as the stacked fills agree on the gap
+#: (:meth:`_Job._doubted`): the weight of their spread against the departure from ``interp``
+#: (tuned, docs/METHOD_NOTES.md)
+AUTO_DOUBT = 0.1
 #: ``regress``: the other bones' channels this many seconds either side count too; fitted within
 #: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
 REGRESS_LAGS = (0.05, 0.1)
@@ -94,8 +107,7 @@ SHRINK = 1.0
 #: how far ``auto`` may go from ``interp`` towards the chosen candidate: per gap the share
 #: whose blend refills the gap's copies best
 AUTO_SHARES = (0.25, 0.5, 0.75, 1.0)
-#: gaps of this many seconds or more are long (above); where no gap of a take could be copied,
-#: they take ``match`` and shorter ones ``mix`` (``half`` for all without bone rotations)
+#: gaps of this many seconds or more are long (above)
 LONG_GAP = 0.5
 #: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
 AUTO_COPIES = 3
@@ -393,10 +405,11 @@ class _Job:
                               hermite_channels(location, moving, damping), base,
                               gaps.any(axis=0))
 
-    def regress(self, channels, location, gaps, base):
-        """Each gapped bone (not a root) as the rest of the body says (``regress``)."""
+    def regress(self, channels, location, gaps, base, lags=REGRESS_LAGS):
+        """Each gapped bone (not a root) as the rest of the body says (``regress``; with
+        ``lags=()`` the body's pose at the frame alone, ``regress_pose``)."""
         return basis_matrices(self.rig, regress_channels(
-            channels, gaps, self.fps, REGRESS_LAGS, REGRESS_WINDOW, REGRESS_RIDGE,
+            channels, gaps, self.fps, lags, REGRESS_WINDOW, REGRESS_RIDGE,
             fixed=self.rig.roots), location, base, gaps.any(axis=0))
 
     def candidates(self, channels, location, gaps, names, base):
@@ -406,6 +419,8 @@ class _Job:
         out = {"interp": interp}
         if "regress" in names:
             out["regress"] = self.regress(channels, location, gaps, interp)
+        if "regress_pose" in names:
+            out["regress_pose"] = self.regress(channels, location, gaps, interp, lags=())
         fillable = self.for_kb(gaps)
         if {"hermite", "knn", "half", "mix"} & set(names):
             out["hermite"] = self.hermite(channels, location, gaps, interp)
@@ -429,9 +444,11 @@ class _Job:
         interpolation (:data:`AUTO_SHARES`) that refill copies of the gap - same bone, same
         length, where the bone is keyed - best, if they do so below :data:`PROMOTE` of
         interpolation's error (short gaps: :data:`PROMOTE_SHORT`, all the way only below
-        :data:`PROMOTE_SHORT_WHOLE`); interpolation otherwise. A gap without copies is scored on the
-        take's copies of other gaps; a take without any takes ``match`` on gaps of
-        :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all)."""
+        :data:`PROMOTE_SHORT_WHOLE`); interpolation otherwise, or ``stack_long`` on gaps of
+        :data:`LONG_STACK` seconds or more; the share of that and of any gap shorter than that
+        cut where the fills disagree on the gap (:meth:`_doubted`). A gap without copies is
+        scored on the take's copies of other gaps; a take without any takes ``match`` on gaps
+        of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all)."""
         rotations = self.kb.turns is not None
         if not rotations:
             self.report("auto: the knowledge base holds no bone rotations (built from markers "
@@ -443,6 +460,8 @@ class _Job:
         runs = gap_runs(gaps)
         choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps else names[1],
                    1.0) for _, a, e in runs]
+        longest = [stack and (e - a + 1) >= LONG_STACK * self.fps for _, a, e in runs]
+        fills = LONG_STACK_FILLS if any(longest) else STACK_FILLS if stack else ()
         if copies:
             probe = np.zeros_like(gaps)
             for _, b, start, length in copies:
@@ -450,13 +469,15 @@ class _Job:
             hidden = interpolate_channels(channels, probe)
             hidden_loc = np.where((probe & self.moves)[..., None],
                                   interpolate_channels(location, probe), location)
-            tried = self.candidates(hidden, hidden_loc, gaps | probe,
-                                    ("interp",) + names + (STACK_FILLS if stack else ()), seen)
+            tried = self.candidates(hidden, hidden_loc, gaps | probe, ("interp",) + names + fills,
+                                    seen)
             truth = self.world(seen)
+            if any(longest):
+                long_table, _ = self._stack_tables(tried, truth, copies, LONG_STACK_FILLS)
             if stack:  # each copy stacked with weights its own gap's copies had no part in
-                table, alone = self._stack_tables(tried, truth, copies)
+                table, alone = self._stack_tables(tried, truth, copies, STACK_FILLS)
                 of_copy = {(b, start): alone[i] for i, b, start, _ in copies}
-                tried["stack"] = self._stacked(tried, gaps | probe,
+                tried["stack"] = self._stacked(tried, gaps | probe, STACK_FILLS,
                                                lambda b, a: of_copy.get((b, a), table))
                 names = names + ("stack",)
             base = self._errors(tried["interp"], truth, copies)
@@ -477,7 +498,21 @@ class _Job:
                          for key, r in ratio.items()}
                 passed = {key: value for key, value in score.items() if value < np.log(
                     PROMOTE if long else PROMOTE_SHORT_WHOLE if key[1] == 1 else PROMOTE_SHORT)}
-                choice[i] = min(passed, key=passed.get) if passed else ("interp", 0.0)
+                # stack_long's share comes from the gap itself
+                choice[i] = (min(passed, key=passed.get) if passed else
+                             ("stack_long", None) if longest[i] else ("interp", 0.0))
+        wanted = np.zeros_like(gaps)
+        for (b, a, e), (name, _) in zip(runs, choice):
+            wanted[a:e + 1, b] = name != "interp"
+        if wanted.any():
+            made = self.candidates(channels, location, wanted,
+                                   {name for name, _ in choice} | set(fills), seen)
+            if stack:
+                made["stack"] = self._stacked(made, wanted, STACK_FILLS, lambda b, a: table)
+                if any(longest):
+                    made["stack_long"] = self._stacked(made, wanted, LONG_STACK_FILLS,
+                                                       lambda b, a: long_table)
+                choice = self._doubted(made, runs, choice)
         counts, partly = {}, {}
         for name, share in choice:
             counts[name] = counts.get(name, 0) + 1
@@ -486,16 +521,8 @@ class _Job:
             f"{name} on {n} of {len(runs)} gaps"
             + (f" ({partly[name]} part of the way from the interpolation)" if partly[name] else "")
             for name, n in counts.items()))
-        wanted = np.zeros_like(gaps)
-        for (b, a, e), (name, _) in zip(runs, choice):
-            wanted[a:e + 1, b] = name != "interp"
         if not wanted.any():
             return seen
-        chosen = {name for name, _ in choice}
-        made = self.candidates(channels, location, wanted,
-                               chosen | (set(STACK_FILLS) if "stack" in chosen else set()), seen)
-        if "stack" in chosen:
-            made["stack"] = self._stacked(made, wanted, lambda b, a: table)
         out = seen.copy()
         for (b, a, e), (name, share) in zip(runs, choice):
             if name != "interp":
@@ -503,11 +530,36 @@ class _Job:
                                           np.ones((e - a + 1, 1), bool), share)[:, 0]
         return out
 
-    def _stack_tables(self, made, truth, copies):
+    def _doubted(self, made, runs, choice):
+        """``choice`` with each share (``stack_long``'s: 1) cut to ``A / (A + AUTO_DOUBT * D)``
+        of itself on the gap: ``A`` the squared joint departure of the share's blend from
+        ``interp``, ``D`` the mean squared spread of the stacked fills (those of
+        :data:`STACK_FILLS`, or :data:`LONG_STACK_FILLS` for ``stack_long``, but ``interp``)
+        about their stack: the fills that agree on the gap are believed, the others hardly. Gaps
+        of :data:`LONG_STACK` seconds or more that the copies gave another fill keep it."""
+        spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (name, _)) in enumerate(zip(runs, choice))
+                 if name == "stack_long" or (name != "interp"
+                                             and e - a + 1 < LONG_STACK * self.fps)]
+        if not spans:
+            return choice
+        worlds = {name: self._spans(basis, spans) for name, basis in made.items()}
+        choice = list(choice)
+        for k, (i, b, _, _) in enumerate(spans):
+            name, share = choice[i]
+            share = 1.0 if share is None else share
+            ref, fills = (("stack_long", LONG_STACK_FILLS) if name == "stack_long" else
+                          ("stack", STACK_FILLS))
+            joints = self.moved_by(b)
+            at = {key: worlds[key][k][:, joints] for key in {name, ref, *fills}}
+            away = share ** 2 * np.sum((at[name] - at["interp"]) ** 2)
+            doubt = np.mean([np.sum((at[fill] - at[ref]) ** 2) for fill in fills[1:]])
+            choice[i] = (name, share * float(away / (away + AUTO_DOUBT * doubt + 1e-12)))
+        return choice
+
+    def _stack_tables(self, made, truth, copies, fills):
         """The ``stack`` weights (:func:`~.stacking.weights`) the copies' errors give for the
-        fills of :data:`STACK_FILLS`: over every copy, and per gap (index) over the copies of
-        the other gaps."""
-        worlds = [self._spans(made[name], copies) for name in STACK_FILLS]
+        ``fills``: over every copy, and per gap (index) over the copies of the other gaps."""
+        worlds = [self._spans(made[name], copies) for name in fills]
         per_gap, total = {}, (0.0, 0.0)
         for k, (i, b, start, length) in enumerate(copies):
             joints, span = self.moved_by(b), slice(start, start + length)
@@ -519,9 +571,9 @@ class _Job:
         return table, {i: stacking.weights(total[0] - sums, total[1] - counts, STACK_RIDGE)
                        for i, (sums, counts) in per_gap.items()}
 
-    def _stacked(self, made, mask, table_of):
-        """``stack``: on each run of ``mask`` the fills of :data:`STACK_FILLS` weighed together
-        frame by frame (rotations about ``interp``'s, locations on the line), the weights from
+    def _stacked(self, made, mask, fills, table_of):
+        """``stack``: on each run of ``mask`` the ``fills`` weighed together frame by frame
+        (rotations about ``interp``'s, locations on the line), the weights from
         ``table_of(bone, first frame of the run)``."""
         out = made["interp"].copy()
         for b, a, e in gap_runs(mask):
@@ -529,10 +581,10 @@ class _Job:
             base = Rotation.from_matrix(out[a:e + 1, b, :3, :3])
             turn = sum(w[:, k:k + 1] * (Rotation.from_matrix(made[name][a:e + 1, b, :3, :3])
                                         * base.inv()).as_rotvec()
-                       for k, name in enumerate(STACK_FILLS))
+                       for k, name in enumerate(fills))
             out[a:e + 1, b, :3, :3] = (Rotation.from_rotvec(turn) * base).as_matrix()
             out[a:e + 1, b, :3, 3] = sum(w[:, k:k + 1] * made[name][a:e + 1, b, :3, 3]
-                                         for k, name in enumerate(STACK_FILLS))
+                                         for k, name in enumerate(fills))
         return out
 
     def _errors(self, basis, truth, copies):

@@ -250,6 +250,35 @@ def test_stacking_weighs_each_fill_where_it_is_right():
     assert np.allclose(empty, 0.5)
 
 
+def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, daz_kb):
+    """The doubt of ``auto`` (``_Job._doubted``) on the walk's real poses: a gap's fill whose
+    stacked fills all agree keeps its share; the same fill where they scatter about it keeps
+    a small part of it; a long gap the copies gave another fill keeps it untouched."""
+    rig, channels, location, fps = walk
+    b = rig.names.index("lShldr")
+    gaps = np.zeros(channels.shape[:2], bool)
+    gaps[200:230, b] = gaps[400:520, b] = True
+    truth = basis_matrices(rig, channels, location)
+    interp = basis_matrices(rig, interpolate_channels(channels, gaps), location)
+    job = bonefill._Job(rig, fps, daz_kb, rig.roots, np.eye(4), None, None, None, None)
+    runs = gap_runs(gaps)
+    choice = [("match", 0.75), ("match", 1.0)]
+    agree = {"interp": interp, "stack": truth, "hermite": truth, "match": truth,
+             "regress": truth}
+    kept = job._doubted(agree, runs, choice)
+    assert kept[0][1] == pytest.approx(0.75) and kept[1] == ("match", 1.0)
+    off = truth.copy()
+    off[gaps, :3, :3] = Rotation.from_rotvec([0.0, 0.0, 1.5]).as_matrix() @ truth[gaps, :3, :3]
+    scatter = dict(agree, hermite=interp, regress=off)
+    cut = job._doubted(scatter, runs, choice)
+    assert 0 < cut[0][1] < 0.75 / 2 and cut[1] == ("match", 1.0)
+    longs = [("interp", 0.0), ("stack_long", None)]
+    kept = job._doubted(dict(agree, stack_long=truth, regress_pose=truth), runs, longs)
+    cut = job._doubted(dict(scatter, stack_long=truth, regress_pose=off), runs, longs)
+    assert kept[0] == cut[0] == ("interp", 0.0)
+    assert kept[1][1] == pytest.approx(1.0) and 0 < cut[1][1] < 0.9  # measured 0.77
+
+
 def test_window_search_finds_the_stretch_the_knowledge_base_holds():
     """A stretch hidden in a knowledge base of other motion, played 1.25x as fast: the best
     window is found at that speed and returned over the whole stretch, gap frames included."""
