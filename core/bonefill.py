@@ -35,8 +35,10 @@ frames:
   placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
   ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
   ``regress`` on the pose alone beside); that and the shorter gaps go from ``interp`` towards
-  their fill only as far as the fills agree on the gap; with a knowledge base of positions only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees carried onto
-  the knowledge base's guess from the known joints alone: a KB that holds the motion) stand in;
+  their fill only as far as the fills agree on the gap; with a knowledge base of positions
+  only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees
+  carried onto the knowledge base's guess from the known joints alone: a KB that holds the
+  motion) stand in;
 - ``slerp``: quaternion slerp between the rotations at the keys either side;
 - ``positions``: the position-space fill of every joint below a gap, then each gapped bone turned
   to its children's filled joints (what the add-on did before; kept for comparison).
@@ -472,10 +474,8 @@ class _Job:
             tried = self.candidates(hidden, hidden_loc, gaps | probe, ("interp",) + names + fills,
                                     seen)
             truth = self.world(seen)
-            if any(longest):
-                long_table, _ = self._stack_tables(tried, truth, copies, LONG_STACK_FILLS)
             if stack:  # each copy stacked with weights its own gap's copies had no part in
-                table, alone = self._stack_tables(tried, truth, copies, STACK_FILLS)
+                table, alone, long_table = self._stack_tables(tried, truth, copies, fills)
                 of_copy = {(b, start): alone[i] for i, b, start, _ in copies}
                 tried["stack"] = self._stacked(tried, gaps | probe, STACK_FILLS,
                                                lambda b, a: of_copy.get((b, a), table))
@@ -558,7 +558,10 @@ class _Job:
 
     def _stack_tables(self, made, truth, copies, fills):
         """The ``stack`` weights (:func:`~.stacking.weights`) the copies' errors give for the
-        ``fills``: over every copy, and per gap (index) over the copies of the other gaps."""
+        fills of :data:`STACK_FILLS`: over every copy, and per gap (index) over the copies of
+        the other gaps; and ``stack_long``'s over every copy where ``fills`` is
+        :data:`LONG_STACK_FILLS` (else None). The errors' moments are taken once, for
+        ``fills``: those of :data:`STACK_FILLS` are their leading block."""
         worlds = [self._spans(made[name], copies) for name in fills]
         per_gap, total = {}, (0.0, 0.0)
         for k, (i, b, start, length) in enumerate(copies):
@@ -567,9 +570,11 @@ class _Job:
                 [world[k][:, joints] - truth[span, joints] for world in worlds], self.fps)
             per_gap[i] = tuple(a + m for a, m in zip(per_gap.get(i, (0.0, 0.0)), moments))
             total = tuple(a + m for a, m in zip(total, moments))
-        table = stacking.weights(*total, STACK_RIDGE)
-        return table, {i: stacking.weights(total[0] - sums, total[1] - counts, STACK_RIDGE)
-                       for i, (sums, counts) in per_gap.items()}
+        n = len(STACK_FILLS)
+        table = stacking.weights(total[0][..., :n, :n], total[1], STACK_RIDGE)
+        alone = {i: stacking.weights((total[0] - sums)[..., :n, :n], total[1] - counts,
+                                     STACK_RIDGE) for i, (sums, counts) in per_gap.items()}
+        return table, alone, (stacking.weights(*total, STACK_RIDGE) if len(fills) > n else None)
 
     def _stacked(self, made, mask, fills, table_of):
         """``stack``: on each run of ``mask`` the ``fills`` weighed together frame by frame
