@@ -302,7 +302,7 @@ class _Job:
         rotation of each gapped bone, times an offset slerped across the gap from what it takes
         to meet the keys at either end. Needs a knowledge base with bone rotations; bones it
         lacks keep ``basis``."""
-        from .matching import at_times, match_windows
+        from .matching import at_times, match_windows, pose_table
 
         kb, rig = self.kb, self.rig
         bones = [b for b, name in enumerate(rig.names) if name in kb.bones and not rig.roots[b]]
@@ -314,9 +314,14 @@ class _Job:
         features = turns[..., :2].reshape(len(turns), len(bones), 6)
         if self._kb_features is None:  # once per fill: auto matches the copies, then the gaps
             kb_turns = kb.turns[:, [kb.bones.index(rig.names[b]) for b in bones]]
-            self._kb_features = Rotation.from_quat(kb_turns.reshape(-1, 4)).as_matrix()[
+            # made unit here: scipy 1.16 (Blender 4.2-5.0's wheels) does it 10x slower, to
+            # the same bits
+            q = kb_turns.reshape(-1, 4).astype(float)
+            q /= np.maximum(np.sqrt((q * q).sum(axis=1)), 1e-12)[:, None]
+            kb_features = Rotation(q, normalize=False, copy=False).as_matrix()[
                 ..., :2].reshape(len(kb_turns), len(bones), 6).astype(np.float32)
-        kb_features = self._kb_features
+            self._kb_features = kb_features, pose_table(kb_features)
+        kb_features, table = self._kb_features
         margin = int(round(MATCH_CONTEXT * self.fps))
         frames = len(gaps)
         busy = [(a, e) for _, a, e in gap_runs(gap.any(axis=1)[:, None])]
@@ -330,8 +335,9 @@ class _Job:
         # context; other gapped bones as Blender interpolates them): the same subject and style
         if MATCH_OWN:
             times = np.arange(0, frames - 1 + 1e-9, self.fps / kb.fps)  # at the KB's rate
-            kb_features = np.concatenate([kb_features, at_times(features, times, frames - 1)
-                                          .astype(np.float32)])
+            own = at_times(features, times, frames - 1).astype(np.float32)
+            kb_features = np.concatenate([kb_features, own])
+            table = np.concatenate([table, pose_table(own)])
             source = np.concatenate([kb.source_index,
                                      np.full(len(times), kb.source_index.max() + 1)])
             hidden = np.concatenate([np.zeros((len(kb.turns), len(bones)), bool),
@@ -351,7 +357,7 @@ class _Job:
                 self.progress((before + done) / len(stretches), "matching the knowledge base")
             found = match_windows(features, weight, kb_features, source, self.fps, kb.fps,
                                   [stretches[i] for i in chosen], width=width,
-                                  on_stretch=on_stretch, kb_hidden=hidden,
+                                  on_stretch=on_stretch, kb_hidden=hidden, table=table,
                                   needs=[gap[busy[i][0]:busy[i][1] + 1].any(axis=0)
                                          for i in chosen])
             before += len(chosen)

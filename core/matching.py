@@ -25,7 +25,7 @@ TOP = 5
 
 def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretches,
                   speeds=SPEEDS, top=TOP, width=None, on_stretch=None, kb_hidden=None,
-                  needs=None):
+                  needs=None, table=None):
     """Per stretch ``(lo, hi)`` of take frames: the mean, over the ``top`` best windows of the
     knowledge base, of their features at each frame lo..hi (an array (hi - lo + 1, items, d)),
     or None where the knowledge base has no window that long.
@@ -40,15 +40,15 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     match pieces of the stretch this long, a quarter of it apart, instead of the whole stretch,
     and blend their means with overlapping triangles (the first and last piece reach the
     stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
-    it may raise to stop).
+    it may raise to stop). ``table``: :func:`pose_table` of ``kb_features``, where the caller
+    keeps it between calls.
     """
     if not stretches:  # the table below costs a pass over the whole knowledge base
         return []
-    # each pose's features and their squares per item, float32 like the poses: one product
-    # per stretch and speed gives every term of the distances that involves the poses
-    flat = kb_features.reshape(len(kb_features), -1)
-    table = np.concatenate([flat, (kb_features.astype(np.float64) ** 2).sum(axis=2)],
-                           axis=1).astype(np.float32)
+    if table is None:
+        table = pose_table(kb_features)
+    features = np.nan_to_num(features)
+    size = len(kb_features)
     out = []
     for done, (lo, hi) in enumerate(stretches):
         if on_stretch:
@@ -64,19 +64,22 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
         for speed in speeds:
             step = speed * fps / kb_fps  # take frames per knowledge-base pose
             times = lo + step * np.arange(int((hi - lo) / step) + 1)
-            if len(times) > len(flat):
+            if len(times) > size:
                 continue
-            q, w = _sample(features, weight, times)
-            sums = _diagonal_sums(q, w, table)
+            pieces = []  # (piece, first row, last row) of the query
             for piece, centre in enumerate(centres):
                 first = int(np.ceil((centre - half - lo) / step - 1e-9))
                 last = min(int((centre + half - lo) / step + 1e-9), len(times) - 1)
+                if last - first >= 1:
+                    pieces.append((piece, first, last))
+            q, w = _sample(features, weight, times)
+            sums = _diagonal_sums(q, w, table, {r for _, first, last in pieces
+                                                for r in (first - 1, last) if r >= 0})
+            for piece, first, last in pieces:
                 span = last - first + 1
-                if span < 2:
-                    continue
-                cost = sums[last, span - 1:].copy()
+                cost = sums[last][span - 1:].copy()
                 if first:
-                    cost[1:] -= sums[first - 1, :len(flat) - span]
+                    cost[1:] -= sums[first - 1][:size - span]
                 cost = cost / max(w[first:last + 1].sum(), 1e-12)
                 cost = np.where(kb_source[:len(cost)] == kb_source[span - 1:], cost, np.inf)
                 if hidden is not None:
@@ -126,29 +129,42 @@ def at_times(values, times, last):
     return values[i0] * (1 - part) + values[i1] * part
 
 
+def pose_table(kb_features):
+    """Each pose's features and their squares per item, float32 like the poses: one product per
+    stretch and speed with it gives every term of the distances that involves the poses. Row by
+    row, so the table of poses put together is the tables put together."""
+    flat = kb_features.reshape(len(kb_features), -1)
+    return np.concatenate([flat, (kb_features.astype(np.float64) ** 2).sum(axis=2)],
+                          axis=1).astype(np.float32)
+
+
 def _sample(features, weight, times):
-    """Features at fractional frame ``times`` (linear), and their weights (the smaller of the
-    two frames')."""
+    """Features (no NaN) at fractional frame ``times`` (linear), and their weights (the smaller
+    of the two frames')."""
     i0, i1, _ = brackets(times, len(features) - 1)
-    return (at_times(np.nan_to_num(features), times, len(features) - 1),
-            np.minimum(weight[i0], weight[i1]))
+    return at_times(features, times, len(features) - 1), np.minimum(weight[i0], weight[i1])
 
 
-def _diagonal_sums(q, w, table):
-    """(rows, poses): entry ``[k, j]`` the weighted squared distance of query rows ..k to
-    knowledge-base poses ..j laid along one diagonal (row k against pose j, row k - 1 against
-    pose j - 1, ...), so a window of rows a..b starting at pose t costs
-    ``[b, t + b - a] - [a - 1, t - 1]`` (the second term 0 where a or t is 0). ``table``: each
-    pose's features and, per item, their sum of squares. The product with them is float32, like
-    the poses (features of unit size: errors far below the costs that rank windows); the sums
-    along the diagonals float64."""
-    width = len(q)
-    lhs = np.concatenate([(-2.0 * q * w[..., None]).reshape(width, -1), w], axis=1)
-    sums = (lhs.astype(np.float32) @ table.T).astype(np.float64)
-    sums += (w * (q ** 2).sum(axis=2)).sum(axis=1)[:, None]
-    for k in range(1, width):
-        sums[k, 1:] += sums[k - 1, :-1]
-    return sums
+def _diagonal_sums(q, w, table, rows):
+    """Per query row ``k`` of ``rows``: (poses,), entry ``j`` the weighted squared distance of
+    query rows ..k to knowledge-base poses ..j laid along one diagonal (row k against pose j,
+    row k - 1 against pose j - 1, ...), so a window of rows a..b starting at pose t costs
+    ``[b][t + b - a] - [a - 1][t - 1]`` (the second term 0 where a or t is 0). ``table``: each
+    pose's features and, per item, their sum of squares (:func:`pose_table`). The product with
+    them is float32, like the poses (features of unit size: errors far below the costs that rank
+    windows); the sums along the diagonals float64, carried one row at a time."""
+    lhs = np.concatenate([(-2.0 * q * w[..., None]).reshape(len(q), -1), w], axis=1)
+    product = lhs.astype(np.float32) @ table.T
+    constant = (w * (q ** 2).sum(axis=2)).sum(axis=1)
+    out, row, before = {}, np.empty(len(table)), np.empty(len(table))
+    for k in range(max(rows) + 1):
+        np.add(product[k], constant[k], out=row, dtype=np.float64)
+        if k:
+            row[1:] += before[:-1]
+        if k in rows:
+            out[k] = row.copy()
+        row, before = before, row
+    return out
 
 
 #: seconds of context either side of a gap, of the pieces matched, and of the chunks a long
