@@ -34,7 +34,8 @@ frames:
   refill the take's copies best) or ``interp``, as copies of the gap - same bone, same length,
   placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
   ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
-  ``regress`` on the pose alone beside); that and the shorter gaps go from ``interp`` towards
+  ``regress`` on the pose alone beside; in equal parts in a take too short for copies, where
+  other bones' gaps overlap the gap); that and the shorter gaps go from ``interp`` towards
   their fill only as far as the fills agree on the gap; with a knowledge base of positions
   only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees
   carried onto the knowledge base's guess from the known joints alone: a KB that holds the
@@ -81,7 +82,8 @@ STACK_FILLS = ("interp", "hermite", "match", "regress")
 STACK_RIDGE = 0.3
 #: gaps of this many seconds or more for which no candidate passes on the copies take
 #: ``stack_long`` rather than ``interp``: :data:`LONG_STACK_FILLS` weighed together like
-#: ``stack`` (``regress_pose``: ``regress`` on the other bones' pose at the frame alone)
+#: ``stack`` (``regress_pose``: ``regress`` on the other bones' pose at the frame alone); in a
+#: take without copies, those of its long gaps that other bones' gaps overlap, in equal parts
 #: (tuned, docs/METHOD_NOTES.md)
 LONG_STACK = 0.75
 LONG_STACK_FILLS = STACK_FILLS + ("regress_pose",)
@@ -456,7 +458,9 @@ class _Job:
         :data:`LONG_STACK` seconds or more; the share of that and of any gap shorter than that
         cut where the fills disagree on the gap (:meth:`_doubted`). A gap without copies is
         scored on the take's copies of other gaps; a take without any takes ``match`` on gaps
-        of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all)."""
+        of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all), but
+        ``stack_long`` in equal parts (doubted) on gaps of :data:`LONG_STACK` seconds or more
+        that gaps of other bones overlap (``match`` sees less of the body there)."""
         rotations = self.kb.turns is not None
         if not rotations:
             self.report("auto: the knowledge base holds no bone rotations (built from markers "
@@ -468,8 +472,14 @@ class _Job:
         runs = gap_runs(gaps)
         choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps else names[1],
                    1.0) for _, a, e in runs]
-        longest = [stack and (e - a + 1) >= LONG_STACK * self.fps for _, a, e in runs]
+        longest = [rotations and (e - a + 1) >= LONG_STACK * self.fps
+                   and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
+                   for _, a, e in runs]
         fills = LONG_STACK_FILLS if any(longest) else STACK_FILLS if stack else ()
+        long_table = np.full((len(stacking.DISTANCES), len(stacking.LENGTHS), len(fills)),
+                             1 / max(len(fills), 1))  # equal parts, unless the copies say
+        if not copies:
+            choice = [("stack_long", None) if last else c for c, last in zip(choice, longest)]
         if copies:
             probe = np.zeros_like(gaps)
             for _, b, start, length in copies:
@@ -515,9 +525,10 @@ class _Job:
                                    {name for name, _ in choice} | set(fills), seen)
             if stack:
                 made["stack"] = self._stacked(made, wanted, STACK_FILLS, lambda b, a: table)
-                if any(longest):
-                    made["stack_long"] = self._stacked(made, wanted, LONG_STACK_FILLS,
-                                                       lambda b, a: long_table)
+            if any(longest):
+                made["stack_long"] = self._stacked(made, wanted, LONG_STACK_FILLS,
+                                                   lambda b, a: long_table)
+            if stack or any(longest):
                 choice = self._doubted(made, runs, choice)
         counts, partly = {}, {}
         for name, share in choice:
@@ -544,7 +555,7 @@ class _Job:
         about their stack: the fills that agree on the gap are believed, the others hardly. Gaps
         of :data:`LONG_STACK` seconds or more that the copies gave another fill keep it."""
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (name, _)) in enumerate(zip(runs, choice))
-                 if name == "stack_long" or (name != "interp"
+                 if name == "stack_long" or (name != "interp" and "stack" in made
                                              and e - a + 1 < LONG_STACK * self.fps)]
         if not spans:
             return choice

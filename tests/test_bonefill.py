@@ -279,6 +279,32 @@ def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, d
     assert kept[1][1] == pytest.approx(1.0) and 0 < cut[1][1] < 0.9  # measured 0.77
 
 
+def test_a_take_too_short_for_copies_stacks_long_gaps_of_several_bones(walk, daz_kb):
+    """Without copies to judge by (3 s of the walk, 1 s gaps), ``auto`` keeps ``match`` for a
+    long gap of one bone and stacks the five fills in equal parts where three bones are gapped
+    together (``match`` sees less of the body there); both better than Blender's
+    interpolation on the joints the gapped bones move (measured 68.7 against 92.5 mm, 46.8
+    against 78.5 mm)."""
+    rig, channels, location, fps = walk
+    channels, location = channels[100:400], location[100:400]
+    truth = rig.joints(basis_matrices(rig, channels, location))
+    for bones, chosen in ((("lShldr",), "match on 1 of 1 gaps"),
+                          (("lShldr", "rThigh", "abdomen"), "stack_long on 3 of 3 gaps")):
+        gaps = np.zeros(channels.shape[:2], bool)
+        for name in bones:
+            gaps[90:210, rig.names.index(name)] = True
+        assert not gap_copies(gaps)
+        seen, said = interpolate_channels(channels, gaps), []
+        filled = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, report=said.append)
+        assert chosen in said[-1]
+        moved = rig.placed_by()[[rig.names.index(name) for name in bones]].any(axis=0)
+
+        def error(basis):
+            return np.sqrt(((rig.joints(basis)[90:210, moved] - truth[90:210, moved]) ** 2)
+                           .sum(axis=-1).mean())
+        assert error(filled) < 0.85 * error(basis_matrices(rig, seen, location))
+
+
 def test_window_search_finds_the_stretch_the_knowledge_base_holds():
     """A stretch hidden in a knowledge base of other motion, played 1.25x as fast: the best
     window is found at that speed and returned over the whole stretch, gap frames included."""
