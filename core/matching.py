@@ -72,6 +72,8 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
                 last = min(int((centre + half - lo) / step + 1e-9), len(times) - 1)
                 if last - first >= 1:
                     pieces.append((piece, first, last))
+            if not pieces:
+                continue
             q, w = _sample(features, weight, times)
             sums = _diagonal_sums(q, w, table, {r for _, first, last in pieces
                                                 for r in (first - 1, last) if r >= 0})

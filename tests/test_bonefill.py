@@ -323,6 +323,9 @@ def test_window_search_finds_the_stretch_the_knowledge_base_holds():
     assert np.abs(mean - walk[150:291]).max() < 1e-3 * np.abs(walk).max()
     [none] = match_windows(walk, weight, kb[:50], source[:50], 80.0, 100.0, [(150, 290)])
     assert none is None  # no window that long
+    # two frames: too short for a window at the faster speeds, the others still answer
+    [short] = match_windows(walk, weight, kb, source, 100.0, 100.0, [(150, 151)], top=1)
+    assert short.shape == (2, 5, 6) and np.isfinite(short).all()
 
 
 def test_window_search_in_pieces_joins_motion_the_knowledge_base_holds_in_parts():
