@@ -87,7 +87,7 @@ STACK_RIDGE = 0.3
 #: (tuned, docs/METHOD_NOTES.md)
 LONG_STACK = 0.75
 LONG_STACK_FILLS = STACK_FILLS + ("regress_pose",)
-#: where the take has copies, ``stack_long`` and every gap shorter than :data:`LONG_STACK` go
+#: ``stack_long``, and where the take has copies every gap shorter than :data:`LONG_STACK`, go
 #: from ``interp`` towards the chosen fill only as far as the stacked fills agree on the gap
 #: (:meth:`_Job._doubted`): the weight of their spread against the departure from ``interp``
 #: (tuned, docs/METHOD_NOTES.md)
@@ -476,9 +476,9 @@ class _Job:
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
         fills = LONG_STACK_FILLS if any(longest) else STACK_FILLS if stack else ()
-        long_table = np.full((len(stacking.DISTANCES), len(stacking.LENGTHS), len(fills)),
-                             1 / max(len(fills), 1))  # equal parts, unless the copies say
-        if not copies:
+        if any(longest) and not copies:  # nothing to weigh the fills by: equal parts
+            long_table = np.full((len(stacking.DISTANCES), len(stacking.LENGTHS), len(fills)),
+                                 1 / len(fills))
             choice = [("stack_long", None) if last else c for c, last in zip(choice, longest)]
         if copies:
             probe = np.zeros_like(gaps)
