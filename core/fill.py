@@ -62,6 +62,14 @@ AUTO_SPLINE_REACH = 4
 AUTO_ENDS_RIDGE = 0.5
 AUTO_ENDS_LEAST = 0.1
 AUTO_ENDS_SAMPLES = 20
+#: the knowledge base's fill of the copies only weighs the methods: it fits fewer local models
+#: (at most this many a second), stops after fewer iterations than the fill of the gaps and takes
+#: this query-noise factor (the one ``models.UNCHECKED_FACTOR`` uses where nothing can be
+#: checked) instead of choosing one (same accuracy on the tuning takes, 0.8-0.9x the time:
+#: docs/METHOD_NOTES.md, "Session 25")
+AUTO_COPIES_MODEL_FPS = 15.0
+AUTO_COPIES_ITERATIONS = 10
+AUTO_COPIES_QUERY_NOISE = 0.25
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
@@ -218,8 +226,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                          if long.any() else None))
         try:
             # one pass: its only use is to weigh the methods
-            knn_copies = (fill_knn(hidden, kb, replace(settings, renormalise=False),
-                                   progress=lambda f, m: progress(0.5 * f, m),
+            scout = replace(settings, renormalise=False, max_iterations=min(
+                settings.max_iterations, AUTO_COPIES_ITERATIONS), model_fps=min(
+                settings.model_fps or np.inf, AUTO_COPIES_MODEL_FPS),
+                query_noise=AUTO_COPIES_QUERY_NOISE if settings.query_noise == "auto"
+                else settings.query_noise)
+            knn_copies = (fill_knn(hidden, kb, scout, progress=lambda f, m: progress(0.5 * f, m),
                                    should_cancel=should_cancel).positions
                           if probe.any() else None)
         except BaseException:
