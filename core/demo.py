@@ -1,11 +1,15 @@
 """``mocap-gapfill demo``: the main job on a built-in default, offline.
 
 Motion made by this project's own code (:mod:`.synth`): six walking/jogging/turning takes form
-two tiny knowledge bases (skeleton joints and markers); a seventh take, in a gait none of them
-has, gets gaps: three bones lose their keys over 60-100 frames (one at the clip's end) and six
-markers vanish over 70-90 frames (one at the clip's start). The gaps are filled with the
-knowledge-base method and, for comparison, linear and spline interpolation; the RMSE against the
-known truth is printed and a plot of original vs recovered trajectories is written.
+two tiny knowledge bases (the skeleton's joints with each bone's rotation, and markers); a seventh
+take, in a gait none of them has, gets gaps: three bones of its armature lose their keys over
+60-100 frames (one at the clip's end), filled in the space of their rotations as the add-on
+fills them (:func:`~.bonefill.fill_bones`) and compared with what Blender shows without a fill
+(its interpolation of the keys either side) and the other curves an animator has; six markers
+vanish over 70-90 frames (one at the clip's start), filled by the default and compared with the
+knowledge-base method alone, the studios' rigid-body fill and linear and spline interpolation.
+The RMSE against the known truth is printed and a plot of original vs recovered trajectories is
+written.
 Then the real takes shipped in ``sample_scenes/`` (CMU): the marker take 01_01 with the gaps it
 really has, and the armature take 03_02 with three bones' keys deleted, filled with the starter
 knowledge bases without their subject (:func:`run_real_demo`).
@@ -20,9 +24,9 @@ from . import synth
 from .evaluate import complete_take, kb_without, punch_gaps, rmse_mm, subject_of, with_gaps
 from .fill import DEFAULT_METHOD, fill
 from .io import read_motion, write_motion
-from .kb import STARTER_DIR, kb_from_motions, starter_kb
+from .kb import STARTER_DIR, kb_from_motions, motion_turns, starter_kb
 from .motion import gap_runs
-from .posing import points_missing
+from .rig import rig_from_motion
 
 FPS = 60.0
 FRAMES = 360
@@ -32,6 +36,9 @@ BONE_GAPS = (("LeftForeArm", 60, 159), ("RightLeg", 120, 199), ("Spine1", 300, 3
 MARKER_GAPS = (("LELB", 40, 129), ("LWRA", 90, 169), ("RKNE", 150, 229), ("RANK", 170, 249),
                ("RTOE", 200, 279), ("LFHD", 0, 69))
 COMPARE = (DEFAULT_METHOD, "knn", "rigid", "linear", "spline")
+#: the armature's: the default and the curves an animator already has across deleted keys
+#: (Blender's own interpolation, a velocity-matched cubic, slerp)
+COMPARE_BONES = ("auto", "interp", "hermite", "slerp")
 
 
 def demo_takes():
@@ -58,35 +65,40 @@ def run_demo(outdir="out", progress=None, report=print):
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     kb_sk, kb_mk, skeleton, markers = demo_takes()
-    kb_skeleton, kb_markers = kb_from_motions(kb_sk), kb_from_motions(kb_mk)
+    kb_skeleton = kb_from_motions(kb_sk, turns=[motion_turns(m) for m in kb_sk])
+    kb_markers = kb_from_motions(kb_mk)
     kb_skeleton.save(outdir / "kb_skeleton.npz", overwrite=True)
     kb_markers.save(outdir / "kb_markers.npz", overwrite=True)
-    report(f"knowledge bases: {kb_skeleton.size} poses of {len(kb_skeleton.names)} joints, "
-           f"{kb_markers.size} poses of {len(kb_markers.names)} markers "
+    report(f"knowledge bases: {kb_skeleton.size} poses of {len(kb_skeleton.names)} joints with "
+           f"each bone's rotation, {kb_markers.size} poses of {len(kb_markers.names)} markers "
            f"({len(synth.KB_GAITS)} synthetic takes) -> {outdir}/kb_*.npz")
 
     bone_gaps = bone_gap_mask(skeleton.names)
-    joint_miss = points_missing(bone_gaps, skeleton.parents, np.zeros(skeleton.n_points, bool))
+    rig, channels, location = rig_from_motion(skeleton)
+    report(f"armature: {FRAMES} frames at {FPS:g} fps, keys deleted: "
+           + ", ".join(f"{name} {a}-{b}" for name, a, b in BONE_GAPS)
+           + f" (the clip ends at {FRAMES - 1})")
+    scores = {("skeleton", method): mm for method, mm in bone_scores(
+        rig, channels, location, bone_gaps, FPS, kb_skeleton, COMPARE_BONES).items()}
+    for method in COMPARE_BONES:
+        report(f"  {method:7s} RMSE over the joints the gapped bones move "
+               f"{scores[('skeleton', method)]:7.1f} mm")
     marker_miss = bone_gap_mask(markers.names, MARKER_GAPS)
-    scores = {}
-    for label, truth, miss, kb in (("skeleton", skeleton, joint_miss, kb_skeleton),
-                                   ("markers", markers, marker_miss, kb_markers)):
-        query = truth.replace(positions=np.where(miss[..., None], np.nan, truth.positions))
-        report(f"{label}: {FRAMES} frames at {FPS:g} fps, {int(miss.sum())} of {miss.size} "
-               f"samples missing")
-        for method in COMPARE:
-            result = fill(query, method, kb=kb, progress=progress)
-            scores[(label, method)] = rmse_mm(result, truth, miss)
-            report(f"  {method:7s} RMSE over missing samples {scores[(label, method)]:7.1f} mm")
-            if method == DEFAULT_METHOD:
-                filled = result
-                if label == "markers":
-                    out = _write_c3d_or_npz(result, outdir / "demo_markers_filled.c3d")
-                    report(f"filled markers -> {out}")
-        if label == "markers":
-            plot = write_plot(outdir / "demo_markers.svg", truth, query, filled,
-                              fill(query, "linear"), "LWRA")
-            report(f"plot of original vs recovered -> {plot}")
+    query = markers.replace(positions=np.where(marker_miss[..., None], np.nan,
+                                               markers.positions))
+    report(f"markers: {FRAMES} frames at {FPS:g} fps, {int(marker_miss.sum())} of "
+           f"{marker_miss.size} samples missing")
+    for method in COMPARE:
+        result = fill(query, method, kb=kb_markers, progress=progress)
+        scores[("markers", method)] = rmse_mm(result, markers, marker_miss)
+        report(f"  {method:7s} RMSE over missing samples {scores[('markers', method)]:7.1f} mm")
+        if method == DEFAULT_METHOD:
+            filled = result
+            out = _write_c3d_or_npz(result, outdir / "demo_markers_filled.c3d")
+            report(f"filled markers -> {out}")
+    plot = write_plot(outdir / "demo_markers.svg", markers, query, filled,
+                      fill(query, "linear"), "LWRA")
+    report(f"plot of original vs recovered -> {plot}")
     real = run_real_demo(outdir, report)
     return {"scores": scores, "real_scores": real, "skeleton": skeleton, "markers": markers,
             "bone_gaps": bone_gaps,
@@ -142,28 +154,40 @@ def _real_markers(outdir, scores, report):
         f"{m} {scores[(REAL_MARKERS, m)]:.1f} mm" for m in (DEFAULT_METHOD, "rigid", "linear")))
 
 
-def _real_armature(scores, report):
+def bone_scores(rig, channels, location, gaps, fps, kb, methods):
+    """``{method: RMSE (mm)}`` of each method's fill of an armature's bone gaps (``gaps``:
+    (frames, bones) bool, keys deleted) over the joints the gapped bones move, against the take
+    as keyed."""
     from .bonefill import fill_bones
-    from .formats.bvh import read_bvh_rig
     from .rig import basis_matrices, interpolate_channels
+
+    truth = rig.joints(basis_matrices(rig, channels, location))
+    moved = rig.moved(gaps)
+    seen = interpolate_channels(channels, gaps)  # what Blender shows across the deleted keys
+    out = {}
+    for method in methods:
+        basis = fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method)
+        err = np.linalg.norm(rig.joints(basis) - truth, axis=2)[moved]
+        out[method] = float(1000 * np.sqrt((err ** 2).mean()))
+    return out
+
+
+def _real_armature(scores, report):
+    from .formats.bvh import read_bvh_rig
 
     rig, channels, location, fps = read_bvh_rig(STARTER_DIR / REAL_ARMATURE)
     path, kb = starter_kb(rig.names)
     kb = kb_without(kb, subject_of(REAL_ARMATURE))
-    truth = basis_matrices(rig, channels, location)
     gaps = np.zeros(channels.shape[:2], dtype=bool)
     for name, a, b in REAL_BONE_GAPS:
         gaps[a:b + 1, rig.names.index(name)] = True
-    moved = rig.moved(gaps)
-    seen = interpolate_channels(channels, gaps)  # what Blender shows across the deleted keys
     report(f"real armature {REAL_ARMATURE} (CMU, Daz-friendly BVH as Blender imports it): "
            f"{len(channels)} frames at {fps:g} fps, keys deleted: "
            + ", ".join(f"{n} {a}-{b}" for n, a, b in REAL_BONE_GAPS)
            + f"; knowledge base {path.name} without subject {subject_of(REAL_ARMATURE)}")
-    for method in ("auto", "interp"):
-        basis = fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method)
-        err = np.linalg.norm(rig.joints(basis) - rig.joints(truth), axis=2)[moved]
-        scores[(REAL_ARMATURE, method)] = float(1000 * np.sqrt((err ** 2).mean()))
+    for method, mm in bone_scores(rig, channels, location, gaps, fps, kb,
+                                  ("auto", "interp")).items():
+        scores[(REAL_ARMATURE, method)] = mm
     report(f"  joints below the gapped bones, RMSE: auto {scores[(REAL_ARMATURE, 'auto')]:.1f} mm"
            f", Blender's own interpolation {scores[(REAL_ARMATURE, 'interp')]:.1f} mm")
 

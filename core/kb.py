@@ -255,6 +255,15 @@ def take_turns(path, skip_frames, n_frames, asf=None):
     return rig_turns(rig, basis_matrices(rig, channels, location))
 
 
+def motion_turns(motion):
+    """:func:`rig_turns` of the armature the add-on's skeleton import builds for a skeleton
+    motion (:func:`~.rig.rig_from_motion`): what :func:`kb_from_motions` keeps of such takes."""
+    from .rig import basis_matrices, rig_from_motion
+
+    rig, channels, location = rig_from_motion(motion)
+    return rig_turns(rig, basis_matrices(rig, channels, location))
+
+
 def rig_turns(rig, basis):
     """``(bone names, quaternions (frames, bones, 4))``: an armature's bone rotations as a
     knowledge base keeps them (:func:`~.rig.aligned_turns`, signs continuous in time)."""

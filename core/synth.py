@@ -159,15 +159,24 @@ def forward(rot, root):
     return pos, world
 
 
+def rest_pose():
+    """The skeleton's rest pose (joints, 3): every joint turned by nothing, the root at the
+    origin (standing upright, arms hanging): the rest of every take's armature, so bone
+    rotations mean the same across takes (:attr:`~.motion.Motion.rest`)."""
+    pos, _ = forward(np.tile(np.eye(3), (1, len(JOINTS), 1, 1)), np.zeros((1, 3)))
+    return pos[0]
+
+
 def take(gait=TEST_GAIT, frames=300, fps=60.0, phase=0.0, name="synthetic"):
-    """One synthetic take: ``(skeleton Motion, marker Motion)``, complete (no gaps)."""
+    """One synthetic take: ``(skeleton Motion, marker Motion)``, complete (no gaps); the
+    skeleton rests in :func:`rest_pose`."""
     rot, root = local_rotations(gait, frames, fps, phase)
     pos, world = forward(rot, root)
     joint = {n: i for i, n in enumerate(NAMES)}
     markers = np.stack([pos[:, joint[j]] + world[:, joint[j]] @ np.asarray(off)
                         for _, j, off in MARKERS], axis=1)
     skeleton = Motion(pos, NAMES, fps, parents=PARENTS, limbs=skeleton_limbs(PARENTS),
-                      source=f"{name} (skeleton)", source_format="array")
+                      source=f"{name} (skeleton)", source_format="array", rest=rest_pose())
     marker_names = tuple(m[0] for m in MARKERS)
     marker_set = Motion(markers, marker_names, fps, limbs=rigid_marker_pairs(markers),
                         source=f"{name} (markers)", source_format="array")
