@@ -35,8 +35,8 @@ frames:
   placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
   ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
   ``regress`` on the pose alone beside; in equal parts in a take too short for copies, where
-  other bones' gaps overlap the gap); that and the shorter gaps go from ``interp`` towards
-  their fill only as far as the fills agree on the gap; with a knowledge base of positions
+  other bones' gaps overlap the gap); the shorter gaps go from ``interp`` towards their fill
+  only as far as the fills agree on the gap; with a knowledge base of positions
   only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees
   carried onto the knowledge base's guess from the known joints alone: a KB that holds the
   motion) stand in;
@@ -87,10 +87,10 @@ STACK_RIDGE = 0.3
 #: (tuned, docs/METHOD_NOTES.md)
 LONG_STACK = 0.75
 LONG_STACK_FILLS = STACK_FILLS + ("regress_pose",)
-#: ``stack_long``, and where the take has copies every gap shorter than :data:`LONG_STACK`, go
-#: from ``interp`` towards the chosen fill only as far as the stacked fills agree on the gap
+#: where the take has copies, every gap shorter than :data:`LONG_STACK` goes from ``interp``
+#: towards the chosen fill only as far as the stacked fills agree on the gap
 #: (:meth:`_Job._doubted`): the weight of their spread against the departure from ``interp``
-#: (tuned, docs/METHOD_NOTES.md)
+#: (tuned, docs/METHOD_NOTES.md; ``stack_long`` went undoubted in session 26)
 AUTO_DOUBT = 0.1
 #: ``regress``: the other bones' channels this many seconds either side count too; fitted within
 #: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
@@ -455,11 +455,11 @@ class _Job:
         length, where the bone is keyed - best, if they do so below :data:`PROMOTE` of
         interpolation's error (short gaps: :data:`PROMOTE_SHORT`, all the way only below
         :data:`PROMOTE_SHORT_WHOLE`); interpolation otherwise, or ``stack_long`` on gaps of
-        :data:`LONG_STACK` seconds or more; the share of that and of any gap shorter than that
-        cut where the fills disagree on the gap (:meth:`_doubted`). A gap without copies is
+        :data:`LONG_STACK` seconds or more; the share of any gap shorter than that cut where
+        the fills disagree on the gap (:meth:`_doubted`). A gap without copies is
         scored on the take's copies of other gaps; a take without any takes ``match`` on gaps
         of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all), but
-        ``stack_long`` in equal parts (doubted) on gaps of :data:`LONG_STACK` seconds or more
+        ``stack_long`` in equal parts on gaps of :data:`LONG_STACK` seconds or more
         that gaps of other bones overlap (``match`` sees less of the body there)."""
         rotations = self.kb.turns is not None
         if not rotations:
@@ -479,7 +479,7 @@ class _Job:
         if any(longest) and not copies:  # nothing to weigh the fills by: equal parts
             long_table = np.full((len(stacking.DISTANCES), len(stacking.LENGTHS), len(fills)),
                                  1 / len(fills))
-            choice = [("stack_long", None) if last else c for c, last in zip(choice, longest)]
+            choice = [("stack_long", 1.0) if last else c for c, last in zip(choice, longest)]
         if copies:
             probe = np.zeros_like(gaps)
             for _, b, start, length in copies:
@@ -514,9 +514,8 @@ class _Job:
                          for key, r in ratio.items()}
                 passed = {key: value for key, value in score.items() if value < np.log(
                     PROMOTE if long else PROMOTE_SHORT_WHOLE if key[1] == 1 else PROMOTE_SHORT)}
-                # stack_long's share comes from the gap itself
                 choice[i] = (min(passed, key=passed.get) if passed else
-                             ("stack_long", None) if longest[i] else ("interp", 0.0))
+                             ("stack_long", 1.0) if longest[i] else ("interp", 0.0))
         wanted = np.zeros_like(gaps)
         for (b, a, e), (name, _) in zip(runs, choice):
             wanted[a:e + 1, b] = name != "interp"
@@ -525,11 +524,10 @@ class _Job:
                                    {name for name, _ in choice} | set(fills), seen)
             if stack:
                 made["stack"] = self._stacked(made, wanted, STACK_FILLS, lambda b, a: table)
+                choice = self._doubted(made, runs, choice)
             if any(longest):
                 made["stack_long"] = self._stacked(made, wanted, LONG_STACK_FILLS,
                                                    lambda b, a: long_table)
-            if stack or any(longest):
-                choice = self._doubted(made, runs, choice)
         counts, partly = {}, {}
         for name, share in choice:
             counts[name] = counts.get(name, 0) + 1
@@ -548,28 +546,24 @@ class _Job:
         return out
 
     def _doubted(self, made, runs, choice):
-        """``choice`` with each share (``stack_long``'s: 1) cut to ``A / (A + AUTO_DOUBT * D)``
-        of itself on the gap: ``A`` the squared joint departure of the share's blend from
-        ``interp``, ``D`` the mean squared spread of the stacked fills (those of
-        :data:`STACK_FILLS`, or :data:`LONG_STACK_FILLS` for ``stack_long``, but ``interp``)
-        about their stack: the fills that agree on the gap are believed, the others hardly. Gaps
-        of :data:`LONG_STACK` seconds or more that the copies gave another fill keep it."""
+        """``choice`` with the share of each gap shorter than :data:`LONG_STACK` cut to ``A / (A
+        + AUTO_DOUBT * D)`` of itself: ``A`` the squared joint departure of the share's blend
+        from ``interp`` on the gap, ``D`` the mean squared spread of the stacked fills (those of
+        :data:`STACK_FILLS` but ``interp``) about their stack there: the fills that agree on the
+        gap are believed, the others hardly. Longer gaps keep their fill."""
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (name, _)) in enumerate(zip(runs, choice))
-                 if name == "stack_long" or (name != "interp" and "stack" in made
-                                             and e - a + 1 < LONG_STACK * self.fps)]
+                 if name != "interp" and e - a + 1 < LONG_STACK * self.fps]
         if not spans:
             return choice
-        worlds = {name: self._spans(basis, spans) for name, basis in made.items()}
+        worlds = {key: self._spans(made[key], spans)
+                  for key in {"stack", *STACK_FILLS} | {choice[i][0] for i, *_ in spans}}
         choice = list(choice)
         for k, (i, b, _, _) in enumerate(spans):
             name, share = choice[i]
-            share = 1.0 if share is None else share
-            ref, fills = (("stack_long", LONG_STACK_FILLS) if name == "stack_long" else
-                          ("stack", STACK_FILLS))
             joints = self.moved_by(b)
-            at = {key: worlds[key][k][:, joints] for key in {name, ref, *fills}}
+            at = {key: worlds[key][k][:, joints] for key in {name, "stack", *STACK_FILLS}}
             away = share ** 2 * np.sum((at[name] - at["interp"]) ** 2)
-            doubt = np.mean([np.sum((at[fill] - at[ref]) ** 2) for fill in fills[1:]])
+            doubt = np.mean([np.sum((at[fill] - at["stack"]) ** 2) for fill in STACK_FILLS[1:]])
             choice[i] = (name, share * float(away / (away + AUTO_DOUBT * doubt + 1e-12)))
         return choice
 

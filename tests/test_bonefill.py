@@ -253,7 +253,7 @@ def test_stacking_weighs_each_fill_where_it_is_right():
 def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, daz_kb):
     """The doubt of ``auto`` (``_Job._doubted``) on the walk's real poses: a gap's fill whose
     stacked fills all agree keeps its share; the same fill where they scatter about it keeps
-    a small part of it; a long gap the copies gave another fill keeps it untouched."""
+    a small part of it; a long gap keeps its fill untouched, ``stack_long`` too."""
     rig, channels, location, fps = walk
     b = rig.names.index("lShldr")
     gaps = np.zeros(channels.shape[:2], bool)
@@ -272,18 +272,15 @@ def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, d
     scatter = dict(agree, hermite=interp, regress=off)
     cut = job._doubted(scatter, runs, choice)
     assert 0 < cut[0][1] < 0.75 / 2 and cut[1] == ("match", 1.0)
-    longs = [("interp", 0.0), ("stack_long", None)]
-    kept = job._doubted(dict(agree, stack_long=truth, regress_pose=truth), runs, longs)
-    cut = job._doubted(dict(scatter, stack_long=truth, regress_pose=off), runs, longs)
-    assert kept[0] == cut[0] == ("interp", 0.0)
-    assert kept[1][1] == pytest.approx(1.0) and 0 < cut[1][1] < 0.9  # measured 0.77
+    longs = [("interp", 0.0), ("stack_long", 1.0)]
+    assert job._doubted(dict(scatter, stack_long=truth), runs, longs) == longs
 
 
 def test_a_take_too_short_for_copies_stacks_long_gaps_of_several_bones(walk, daz_kb):
     """Without copies to judge by (3 s of the walk, 1 s gaps), ``auto`` keeps ``match`` for a
     long gap of one bone and stacks the five fills in equal parts where three bones are gapped
     together (``match`` sees less of the body there); both better than Blender's
-    interpolation on the joints the gapped bones move (measured 68.7 against 92.5 mm, 46.8
+    interpolation on the joints the gapped bones move (measured 68.7 against 92.5 mm, 45.2
     against 78.5 mm)."""
     rig, channels, location, fps = walk
     channels, location = channels[100:400], location[100:400]
