@@ -95,7 +95,7 @@ AUTO_DOUBT = 0.1
 #: ``regress``: the other bones' channels this many seconds either side count too; fitted within
 #: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
 REGRESS_LAGS = (0.05, 0.1)
-REGRESS_WINDOW = 2.0
+REGRESS_WINDOW = 3.0
 REGRESS_RIDGE = 0.1
 NEEDS_KB = ("auto", "knn", "match", "positions")
 #: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
