@@ -68,7 +68,7 @@ BONE_BASELINES = ("interp", "hermite", "slerp")
 #: the subtree carried onto the knowledge base's guess from the known joints alone; ``mix``:
 #: :data:`MIX_SHARE` of the way from ``hermite`` to ``match``)
 CANDIDATES = ("interp", "hermite", "knn", "half", "recall", "match", "mix", "regress",
-              "regress_pose")
+              "regress_pose", "regress_kernel")
 #: what ``auto`` chooses from beside ``interp``: with a knowledge base of bone rotations, and
 #: without one (built from positions alone, or by an older version)
 AUTO_CANDIDATES = ("match", "mix")
@@ -82,11 +82,12 @@ STACK_FILLS = ("interp", "hermite", "match", "regress")
 STACK_RIDGE = 0.3
 #: gaps of this many seconds or more for which no candidate passes on the copies take
 #: ``stack_long`` rather than ``interp``: :data:`LONG_STACK_FILLS` weighed together like
-#: ``stack`` (``regress_pose``: ``regress`` on the other bones' pose at the frame alone); in a
+#: ``stack`` (``regress_pose``: ``regress`` on the other bones' pose at the frame alone;
+#: ``regress_kernel``: ``regress`` with a Gaussian kernel beside the linear one); in a
 #: take without copies, those of its long gaps that other bones' gaps overlap, in equal parts
 #: (tuned, docs/METHOD_NOTES.md)
 LONG_STACK = 0.75
-LONG_STACK_FILLS = STACK_FILLS + ("regress_pose",)
+LONG_STACK_FILLS = STACK_FILLS + ("regress_pose", "regress_kernel")
 #: where the take has copies, every gap shorter than :data:`LONG_STACK` goes from ``interp``
 #: towards the chosen fill only as far as the stacked fills agree on the gap
 #: (:meth:`_Job._doubted`): the weight of their spread against the departure from ``interp``
@@ -415,12 +416,13 @@ class _Job:
                               hermite_channels(location, moving, damping), base,
                               gaps.any(axis=0))
 
-    def regress(self, channels, location, gaps, base, lags=REGRESS_LAGS):
+    def regress(self, channels, location, gaps, base, lags=REGRESS_LAGS, kernel=False):
         """Each gapped bone (not a root) as the rest of the body says (``regress``; with
-        ``lags=()`` the body's pose at the frame alone, ``regress_pose``)."""
+        ``lags=()`` the body's pose at the frame alone, ``regress_pose``; with ``kernel``,
+        ``regress_kernel``)."""
         return basis_matrices(self.rig, regress_channels(
             channels, gaps, self.fps, lags, REGRESS_WINDOW, REGRESS_RIDGE,
-            fixed=self.rig.roots), location, base, gaps.any(axis=0))
+            fixed=self.rig.roots, kernel=kernel), location, base, gaps.any(axis=0))
 
     def candidates(self, channels, location, gaps, names, base):
         """Basis matrices of the named candidates (of :data:`CANDIDATES`) for these gaps;
@@ -431,6 +433,8 @@ class _Job:
             out["regress"] = self.regress(channels, location, gaps, interp)
         if "regress_pose" in names:
             out["regress_pose"] = self.regress(channels, location, gaps, interp, lags=())
+        if "regress_kernel" in names:
+            out["regress_kernel"] = self.regress(channels, location, gaps, interp, kernel=True)
         fillable = self.for_kb(gaps)
         if {"hermite", "knn", "half", "mix"} & set(names):
             out["hermite"] = self.hermite(channels, location, gaps, interp)

@@ -326,7 +326,7 @@ def hermite_channels(values, gaps, damping=None):
     return out
 
 
-def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None):
+def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=False):
     """Like :func:`interpolate_channels`, but each gap with a key on both sides takes what the
     rest of the body says of the bone: a ridge regression of its channels on the channels of
     every bone keyed throughout the gap (at the frame and ``lags`` seconds either side, so the
@@ -334,7 +334,10 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None):
     seconds of the gap where the bone and all of those are keyed; the regression's miss at the
     keys either side is interpolated across the gap, so the fill meets both keys. ``ridge``:
     the penalty per training frame on standardised channels. ``fixed`` ((bones,) bool): bones
-    left as interpolated (roots). A gap with too few training frames stays linear."""
+    left as interpolated (roots). A gap with too few training frames stays linear. ``kernel``:
+    a Gaussian kernel (bandwidth: the median squared distance between training frames, scaled to
+    the linear kernel's mean) beside the linear one, so the bone may follow the others in a
+    curve."""
     out = interpolate_channels(values, gaps)
     frames, bones, width = out.shape
     steps = sorted({0} | {s * int(round(abs(t) * fps)) for t in lags for s in (-1, 1)})
@@ -361,7 +364,18 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None):
             # ridge in its dual form: fewer training frames than features
             xt = x[train]
             gram = xt @ xt.T + ridge * len(xt) * np.eye(len(xt))
-            pred = x @ (xt.T @ np.linalg.solve(gram, y[train] - centre)) + centre
+            if kernel:
+                near = x @ xt.T
+                scale = np.trace(near[train]) / len(xt)
+                squared = np.maximum(np.sum(x ** 2, axis=1)[:, None]
+                                     + np.sum(xt ** 2, axis=1)[None] - 2 * near, 0)
+                inner = squared[train]
+                band = np.median(inner[inner > 0]) if (inner > 0).any() else 1.0
+                gram += scale * np.exp(-inner / band)
+                pred = ((near + scale * np.exp(-squared / band))
+                        @ np.linalg.solve(gram, y[train] - centre) + centre)
+            else:
+                pred = x @ (xt.T @ np.linalg.solve(gram, y[train] - centre)) + centre
             miss = y - pred  # known at the keys either side of the gap
             span = np.arange(a, e + 1)
             ends = np.array([a - 1, e + 1])
