@@ -34,7 +34,8 @@ frames:
   refill the take's copies best) or ``interp``, as copies of the gap - same bone, same length,
   placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
   ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
-  ``regress`` on the pose alone beside; in equal parts in a take too short for copies, where
+  ``regress`` on the pose alone and ``regress`` with a Gaussian kernel beside; in equal parts
+  in a take too short for copies, where
   other bones' gaps overlap the gap); the shorter gaps go from ``interp`` towards their fill
   only as far as the fills agree on the gap; with a knowledge base of positions
   only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees

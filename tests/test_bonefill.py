@@ -283,10 +283,10 @@ def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, d
 
 def test_a_take_too_short_for_copies_stacks_long_gaps_of_several_bones(walk, daz_kb):
     """Without copies to judge by (3 s of the walk, 1 s gaps), ``auto`` keeps ``match`` for a
-    long gap of one bone and stacks the five fills in equal parts where three bones are gapped
-    together (``match`` sees less of the body there); both better than Blender's
-    interpolation on the joints the gapped bones move (measured 68.7 against 92.5 mm, 45.2
-    against 78.5 mm)."""
+    long gap of one bone and stacks the six fills of ``stack_long`` in equal parts where three
+    bones are gapped together (``match`` sees less of the body there); both better than
+    Blender's interpolation on the joints the gapped bones move (measured 68.7 against 92.5 mm,
+    45.6 against 78.5 mm)."""
     rig, channels, location, fps = walk
     channels, location = channels[100:400], location[100:400]
     truth = rig.joints(basis_matrices(rig, channels, location))
