@@ -24,6 +24,7 @@ import numpy as np
 
 from .errors import GapFillError
 from .fill import METHODS, fill
+from .formats.asfamc import find_asf
 from .kb import build_kb, load_kb, resample
 from .motion import gap_runs
 from .io import read_motion, read_rig_take
@@ -42,8 +43,16 @@ _LEG = re.compile(r"(leg|thigh|shin|foot|toe|femur|tibia|knee|kne|ankle|ank|heel
 
 
 def subject_of(path):
-    """Subject id from a file name: CMU ``07_05`` -> ``07``, HDM05 ``HDM_dg_...`` -> ``HDM_dg``."""
-    name = Path(path).name.split(".")[0]
+    """Subject id from a file name: CMU ``07_05`` -> ``07``, HDM05 ``HDM_dg_...`` -> ``HDM_dg``;
+    an AMC beside its ASF is its skeleton's subject (``charleston1.amc`` and ``charleston2.amc``
+    of ``charleston.asf`` are one performer)."""
+    path = Path(path)
+    if path.suffix.lower() == ".amc" and path.is_file():
+        try:
+            path = find_asf(path)
+        except GapFillError:
+            pass
+    name = path.name.split(".")[0]
     if name.upper().startswith("HDM_"):
         return "_".join(name.split("_")[:2])
     return name.split("_")[0]

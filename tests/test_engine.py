@@ -137,6 +137,15 @@ def test_search_equals_the_exact_oracle(daz_kb):
         KBIndex(daz_kb.poses[:100]).search(queries, present, 101)
 
 
+def test_two_takes_of_one_skeleton_are_one_subject(data_dir):
+    """The held-out subject goes out of the KB whole: the two Charleston AMCs share one ASF
+    (one performer), CMU trials keep their subject number, names alone keep the old rule."""
+    folder = data_dir / "cmu/asfamc/_unverified/charleston"
+    assert subject_of(folder / "charleston1.amc") == subject_of(folder / "charleston2.amc")
+    assert subject_of(data_dir / "cmu/asfamc/07/07_05.amc") == subject_of("07_05") == "07"
+    assert subject_of(data_dir / "cmu/asfamc/_unverified/lambada/lambada.amc") == "lambada"
+
+
 def test_default_beats_every_baseline_and_keeps_observations(daz_kb, walk):
     kb = kb_without(daz_kb, subject_of("07_05"))
     assert not any(subject_of(s) == "07" for s in np.array(kb.sources)[np.unique(kb.source_index)])
