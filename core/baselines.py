@@ -10,9 +10,10 @@
   are centred and scaled, the principal components of the frames where all points are present
   are fitted to the present coordinates of each incomplete frame (no training data needed);
 - ``rigid``: rigid-body fill (Vicon Nexus "Rigid Body Fill", QTM "rigid body" fill): per missing
-  sample, the 3 points whose distance to it varied least while both were seen (copies of one
-  point counted once) carry it from each gap end by a best-fit rigid transform (Kabsch), the two
-  estimates blended linearly across the gap;
+  sample, 3 points seen there carry it from each gap end by a best-fit rigid transform (Kabsch),
+  the two estimates blended linearly across the gap: a rigid body with it where one is seen (each
+  donor's distance to it and to the donors before it steady within 5 mm while seen), else the 3
+  whose distance to it varied least (copies of one point counted once);
 - ``pattern``: pattern fill (Vicon Nexus "Pattern Fill"): the gap takes the shape of the donor
   trajectory, seen across the whole gap, whose offset to the point varied least while both were
   seen, offset-blended to the point's values at both gap ends;
@@ -36,6 +37,9 @@ from .posing import best_rotation
 
 #: donors of a rigid-body fill
 RIGID_DONORS = 3
+#: metres: a point's donors form a rigid body with it where each stays this steady (SD of the
+#: distance) against it and the other donors (:func:`_donors`; tuned, docs/METHOD_NOTES.md)
+RIGID_TOGETHER = 0.005
 #: metres added (in quadrature) to the donors' spread when two rigid estimates are weighed
 SPREAD_FLOOR = 0.005
 #: (gap, donor set) pairs times frames that the search for the gaps' nearest references looks at
@@ -188,7 +192,8 @@ def fill_rigid(pos, donors=RIGID_DONORS):
 def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cache=None,
                     reach=None, should_cancel=None, only=None):
     """:func:`fill_rigid` and, per sample it carried, the RMS spread (metres) of its donors'
-    distances to it: near 0 where the point rides on a rigid segment with them (NaN elsewhere).
+    distances to it (and, where they form a rigid body with it, to each other: :func:`_donors`):
+    near 0 where the point rides on a rigid segment with them (NaN elsewhere).
 
     ``weighted`` weighs each donor's fit by the inverse square of its spread. ``partners``:
     positions (same shape, more of them seen) to choose the donors from, e.g. a take whose
@@ -219,13 +224,16 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     for p, gaps in runs.items():
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
+        if "mutual" not in stats:  # every pair's spread: donors must be steady together too
+            stats["mutual"] = np.array([_pair_stats(partners, q, np.isfinite(partners[..., 0]))[0]
+                                        for q in range(pos.shape[1])])
         if p not in stats:  # the partners' spread, and the partners steadiest first
-            spread = _pair_stats(partners, p, np.isfinite(partners[..., 0]))[0]
+            spread = stats["mutual"][p]
             order = np.flatnonzero(np.isfinite(spread))
             order = order[np.argsort(spread[order], kind="stable")]
             # a second copy of a donor adds nothing to its fit but a turn about the others
             kept = [j for i, j in enumerate(order) if not same[j, order[:i]].any()]
-            stats[p] = spread, np.array(kept, dtype=int)
+            stats[p] = spread, np.array(kept, dtype=int), stats["mutual"]
         estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
         if reach:
             estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, stats[p], donors,
@@ -254,12 +262,12 @@ def same_points(pos, tolerance=0.001):
 def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     """Rigid estimates of point ``p`` over its gaps ``runs`` ((first, last) frames, inclusive)
     and their donors' RMS spread, one row per gap frame in the order of ``runs`` (NaN where
-    none). ``steady``: every point's spread against ``p`` and the points in order of it (the
-    steadiest first). Per frame, the steadiest ``donors`` seen there, carried from the gap's
-    ends (where the donors must be seen) or, given ``reach``, from the nearest frames within
-    ``reach`` times the gap's length where ``p`` and the donors are seen; estimates from
-    references either side are blended linearly across the gap. All gaps of the point are
-    fitted at once (one batch of Kabsch fits)."""
+    none). ``steady``: every point's spread against ``p``, the points in order of it (the
+    steadiest first) and every pair's spread. Per frame, ``donors`` seen there (:func:`_donors`),
+    carried from the gap's ends (where the donors must be seen) or, given ``reach``, from the
+    nearest frames within ``reach`` times the gap's length where ``p`` and the donors are seen;
+    estimates from references either side are blended linearly across the gap. All gaps of the
+    point are fitted at once (one batch of Kabsch fits)."""
     frames = len(pos)
     a, b = np.array(runs, dtype=int).reshape(-1, 2).T
     length = b - a + 1
@@ -267,7 +275,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     t = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length - a, length)
     estimate = np.full((len(t), 3), np.nan)
     rms = np.full(len(t), np.nan)
-    spread, order = steady
+    spread, order, mutual = steady
     if len(order) < donors:
         return estimate, rms
     # the donors each gap may take: seen at its ends, or with the point within reach of them
@@ -288,12 +296,11 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
         hi = np.minimum(frames, b + 1 + far)
         allowed[after] &= both[hi[after]] > both[b[after] + 1]
     ok = seen[t][:, order] & allowed[gap]
-    first = ok & (np.cumsum(ok, axis=1) <= donors)
-    rows = np.flatnonzero(first.sum(axis=1) == donors)
+    places, costs = _donors(ok, spread[order], mutual[np.ix_(order, order)], donors)
+    rows = np.flatnonzero(np.isfinite(costs).all(axis=1))
     if not len(rows):
         return estimate, rms
-    places = np.nonzero(first[rows])[1].reshape(-1, donors)
-    chosen = order[places]  # (rows, donors)
+    chosen, costs = order[places[rows]], costs[rows]  # (rows, donors)
     g, t = gap[rows], t[rows]
     if reach is None:
         refs = np.stack([np.where(before[g], a[g] - 1, -1), np.where(after[g], b[g] + 1, -1)],
@@ -303,14 +310,14 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     # each row's first reference (before the gap if any), then its second
     refs = np.where((refs[:, :1] < 0), refs[:, ::-1], refs)
     has = refs[:, 0] >= 0
-    rows, chosen, t, refs = rows[has], chosen[has], t[has], refs[has]
+    rows, chosen, costs, t, refs = rows[has], chosen[has], costs[has], t[has], refs[has]
     if not len(rows):
         return estimate, rms
     two = refs[:, 1] >= 0
     with np.errstate(invalid="ignore", divide="ignore"):
         late = np.where(two, (t - refs[:, 0]) / (refs[:, 1] - refs[:, 0]), 0.0)
     weights = np.stack([np.where(two, 1 - late, 1.0), late], axis=1)
-    w = 1 / np.maximum(spread[chosen], 1e-4) ** 2 if weighted else np.ones(chosen.shape)
+    w = 1 / np.maximum(costs, 1e-4) ** 2 if weighted else np.ones(chosen.shape)
     w /= w.sum(axis=1, keepdims=True)
     cw = w[..., None]  # (rows, donors, 1)
     cur = pos[t[:, None], chosen]  # (rows, donors, 3)
@@ -328,8 +335,38 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
         moved = np.einsum("fij,fj->fi", rot, pos[ref_t, p] - c_ref) + c_cur[use]
         found[use] += weights[use, k][:, None] * moved
     estimate[rows] = found
-    rms[rows] = np.sqrt(np.mean(spread[chosen] ** 2, axis=1))
+    rms[rows] = np.sqrt(np.mean(costs ** 2, axis=1))
     return estimate, rms
+
+
+def _donors(ok, spread, mutual, donors):
+    """Per row of candidates ``ok`` ((rows, candidates) bool; ``spread``: theirs against the point,
+    ``mutual``: theirs against each other), the places of its ``donors`` among the candidates and
+    their spread, (rows, donors) each (inf where fewer are there). A rigid body with the point
+    first: the donors chosen one by one, each the steadiest against the point and the donors
+    before it, where all of that stays within :data:`RIGID_TOGETHER`; elsewhere the steadiest
+    against the point alone. A joint keeps its distance to the next one down the chain (a bone's
+    length) while that one turns about it: three such partners are no rigid body, and where a
+    rigid one rides with the point (a clavicle with the back) the fit through them swung it 180
+    mm off; where none does (a knee) they are still the best guess."""
+    rows = np.arange(len(ok))
+    cost = np.where(ok, spread[None], np.inf)
+    places, costs = [], []
+    for _ in range(donors):
+        pick = np.argmin(cost, axis=1)
+        places.append(pick)
+        costs.append(cost[rows, pick])
+        cost[rows, pick] = np.inf
+        cost = np.maximum(cost, mutual[pick])
+    places, costs = np.stack(places, axis=1), np.stack(costs, axis=1)
+    loose = ~(costs.max(axis=1) <= RIGID_TOGETHER)
+    first = ok[loose] & (np.cumsum(ok[loose], axis=1) <= donors)
+    full = first.sum(axis=1) == donors
+    alone = np.zeros((len(full), donors), int)
+    alone[full] = np.nonzero(first[full])[1].reshape(-1, donors)
+    places[loose] = alone
+    costs[loose] = np.where(full[:, None], spread[alone], np.inf)
+    return places, costs
 
 
 def _weigh(found):

@@ -74,6 +74,32 @@ def test_a_second_copy_of_a_marker_is_no_second_donor(data_dir, monkeypatch):
     assert copies_as_donors > 10 * rigid and rigid < 1.5 * linear
 
 
+def test_rigid_donors_keep_their_distances_to_each_other_too(data_dir, monkeypatch):
+    """A skeleton joint keeps its distance to the next joint down the chain (a bone's length)
+    while that joint turns about it: the three points steadiest against a clavicle (upper back,
+    humerus, the other clavicle: each at a constant distance) are no rigid body together, and the
+    Kabsch fit through them swung the clavicle 180 mm off on the mean (CMU 07_05, ASF/AMC). Each
+    donor must be steady against the donors before it as well."""
+    take = read_motion(data_dir / "cmu/asfamc/07/07_05.amc")
+    name = take.names.index
+    half = take.n_frames // 2
+    gappy = take.positions.copy()
+    gappy[half:, [name("lclavicle"), name("thorax")]] = np.nan
+
+    def error():
+        out = baselines.fill_rigid(gappy)[half:, name("lclavicle")]
+        return 1000 * np.linalg.norm(out - take.positions[half:, name("lclavicle")], axis=1).mean()
+
+    steady_together = error()
+    # the donors chosen by their steadiness against the point alone, as before
+    monkeypatch.setattr(baselines, "_pair_stats", lambda pos, p, seen, pair=baselines._pair_stats:
+                        pair(pos, p, seen) if p == name("lclavicle") else
+                        tuple(np.zeros(pos.shape[1]) for _ in range(2)))
+    steady_with_the_point = error()
+    print(steady_together, steady_with_the_point)  # when written: 14.1 and 177.5 mm
+    assert steady_together < 20 and steady_with_the_point > 5 * steady_together
+
+
 def test_rigid_fill_falls_back_to_linear_without_three_donors():
     pos = _tumbling_body()[:, [0, 1, 6]]  # two body points and the loose one
     gappy = pos.copy()
