@@ -221,19 +221,28 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     for p, a, b in gap_runs(~seen):
         if only is None or only[a, p]:
             runs.setdefault(p, []).append((a, b))
+    partner_seen = np.isfinite(partners[..., 0])
+
+    def spread_of(q):  # every point's spread against q, once per take
+        if ("spread", q) not in stats:
+            stats[("spread", q)] = _pair_stats(partners, q, partner_seen)[0]
+        return stats[("spread", q)]
+
     for p, gaps in runs.items():
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
-        if "mutual" not in stats:  # every pair's spread: donors must be steady together too
-            stats["mutual"] = np.array([_pair_stats(partners, q, np.isfinite(partners[..., 0]))[0]
-                                        for q in range(pos.shape[1])])
-        if p not in stats:  # the partners' spread, and the partners steadiest first
-            spread = stats["mutual"][p]
+        if p not in stats:  # the partners' spread, the partners steadiest first, and the pairs'
+            spread = spread_of(p)
             order = np.flatnonzero(np.isfinite(spread))
             order = order[np.argsort(spread[order], kind="stable")]
             # a second copy of a donor adds nothing to its fit but a turn about the others
             kept = [j for i, j in enumerate(order) if not same[j, order[:i]].any()]
-            stats[p] = spread, np.array(kept, dtype=int), stats["mutual"]
+            # spreads between the donors: only those steady enough against p can be a rigid
+            # body with it (:func:`_donors`); the other rows never count
+            mutual = np.full((len(spread),) * 2, np.inf)
+            for q in np.flatnonzero(spread <= RIGID_TOGETHER):
+                mutual[q] = spread_of(q)
+            stats[p] = spread, np.array(kept, dtype=int), mutual
         estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
         if reach:
             estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, stats[p], donors,
