@@ -239,10 +239,9 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
             kept = [j for i, j in enumerate(order) if not same[j, order[:i]].any()]
             # spreads between the donors: only those steady enough against p can be a rigid
             # body with it (:func:`_donors`); the other rows never count
-            mutual = np.full((len(spread),) * 2, np.inf)
-            for q in np.flatnonzero(spread <= RIGID_TOGETHER):
-                mutual[q] = spread_of(q)
-            stats[p] = spread, np.array(kept, dtype=int), mutual
+            steady = np.flatnonzero(spread <= RIGID_TOGETHER)
+            rows = np.array([spread_of(q) for q in steady]).reshape(len(steady), len(spread))
+            stats[p] = spread, np.array(kept, dtype=int), (steady, rows)
         estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
         if reach:
             estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, stats[p], donors,
@@ -272,7 +271,8 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     """Rigid estimates of point ``p`` over its gaps ``runs`` ((first, last) frames, inclusive)
     and their donors' RMS spread, one row per gap frame in the order of ``runs`` (NaN where
     none). ``steady``: every point's spread against ``p``, the points in order of it (the
-    steadiest first) and every pair's spread. Per frame, ``donors`` seen there (:func:`_donors`),
+    steadiest first), and the points within :data:`RIGID_TOGETHER` of ``p`` with every point's
+    spread against them. Per frame, ``donors`` seen there (:func:`_donors`),
     carried from the gap's ends (where the donors must be seen) or, given ``reach``, from the
     nearest frames within ``reach`` times the gap's length where ``p`` and the donors are seen;
     estimates from references either side are blended linearly across the gap. All gaps of the
@@ -284,9 +284,13 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     t = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length - a, length)
     estimate = np.full((len(t), 3), np.nan)
     rms = np.full(len(t), np.nan)
-    spread, order, mutual = steady
+    spread, order, (steadiest, rows_of) = steady
     if len(order) < donors:
         return estimate, rms
+    place = np.full(len(spread), -1)
+    place[order] = np.arange(len(order))
+    mutual = np.full((len(order),) * 2, np.inf)  # between the candidates, in their order
+    mutual[place[steadiest][place[steadiest] >= 0]] = rows_of[place[steadiest] >= 0][:, order]
     # the donors each gap may take: seen at its ends, or with the point within reach of them
     before, after = a > 0, b < frames - 1
     if reach is None:
@@ -305,7 +309,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
         hi = np.minimum(frames, b + 1 + far)
         allowed[after] &= both[hi[after]] > both[b[after] + 1]
     ok = seen[t][:, order] & allowed[gap]
-    places, costs = _donors(ok, spread[order], mutual[np.ix_(order, order)], donors)
+    places, costs = _donors(ok, spread[order], mutual, donors)
     rows = np.flatnonzero(np.isfinite(costs).all(axis=1))
     if not len(rows):
         return estimate, rms
