@@ -290,7 +290,8 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     place = np.full(len(spread), -1)
     place[order] = np.arange(len(order))
     mutual = np.full((len(order),) * 2, np.inf)  # between the candidates, in their order
-    mutual[place[steadiest][place[steadiest] >= 0]] = rows_of[place[steadiest] >= 0][:, order]
+    at = place[steadiest]
+    mutual[at[at >= 0]] = rows_of[at >= 0][:, order]
     # the donors each gap may take: seen at its ends, or with the point within reach of them
     before, after = a > 0, b < frames - 1
     if reach is None:
@@ -362,6 +363,15 @@ def _donors(ok, spread, mutual, donors):
     length) while that one turns about it: three such partners are no rigid body, and where a
     rigid one rides with the point (a clavicle with the back) the fit through them swung it 180
     mm off; where none does (a knee) they are still the best guess."""
+    places, costs = _steadiest(ok, spread, mutual, donors)
+    loose = ~(costs.max(axis=1) <= RIGID_TOGETHER)
+    places[loose], costs[loose] = _steadiest(ok[loose], spread, np.zeros_like(mutual), donors)
+    return places, costs
+
+
+def _steadiest(ok, spread, mutual, donors):
+    """:func:`_donors` chosen one by one, each the steadiest against the point and the donors
+    before it (with ``mutual`` all 0: against the point alone, the first in ``spread``'s order)."""
     rows = np.arange(len(ok))
     cost = np.where(ok, spread[None], np.inf)
     places, costs = [], []
@@ -371,15 +381,7 @@ def _donors(ok, spread, mutual, donors):
         costs.append(cost[rows, pick])
         cost[rows, pick] = np.inf
         cost = np.maximum(cost, mutual[pick])
-    places, costs = np.stack(places, axis=1), np.stack(costs, axis=1)
-    loose = ~(costs.max(axis=1) <= RIGID_TOGETHER)
-    first = ok[loose] & (np.cumsum(ok[loose], axis=1) <= donors)
-    full = first.sum(axis=1) == donors
-    alone = np.zeros((len(full), donors), int)
-    alone[full] = np.nonzero(first[full])[1].reshape(-1, donors)
-    places[loose] = alone
-    costs[loose] = np.where(full[:, None], spread[alone], np.inf)
-    return places, costs
+    return np.stack(places, axis=1), np.stack(costs, axis=1)
 
 
 def _weigh(found):
