@@ -157,7 +157,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     copies of the point's gaps on this take.
 
     Each gap is copied (same points, same length, or shorter where the take has no room) to
-    nearby frames where its point is observed; both fill those copies, and a point's gaps take
+    nearby frames where its point is observed; both fill those copies (seeing, as the gaps'
+    fill will, what rigid partners carry closely through gaps longer than
+    :data:`AUTO_SPLINE_SECONDS`: :func:`_carried_closely`), and a point's gaps take
     ``w * knn + (1 - w) * rigid`` with ``w = e_rigid / (e_knn + e_rigid)`` (``e``: mean squared
     error on the point's copies: inverse-variance weights). Rigid partners go first: a point
     they refill better than the knowledge base and within :data:`AUTO_RIGID_FIRST` (markers:
@@ -212,13 +214,18 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                         reach=reach, should_cancel=stopped, only=only)
         return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
 
-    hidden = motion.replace(positions=np.where(probe[..., None], np.nan, motion.positions))
+    rigid, spread = carried(motion)
+    # the copies are refilled as the gaps will be: where rigid partners carry a point closely
+    # through a gap, the knowledge base sees it there (below), so it is seen at the copies too
+    hidden = motion.replace(positions=np.where(
+        probe[..., None], np.nan,
+        np.where(_carried_closely(missing, spread, alone, motion.fps)[..., None], rigid,
+                 motion.positions)))
     # the rigid estimates and the windows need no local models: they run beside the first fill
     # (numpy lets go of the interpreter in its products; the results are the same as one after
     # the other)
     with ThreadPoolExecutor(max_workers=1) as pool:
         estimates = pool.submit(lambda: (carried(hidden) if probe.any() else (None, None),
-                                         carried(motion),
                                          fill_match(hidden, kb, long, stopped).positions
                                          if long.any() else None,
                                          regress_points(hidden.positions, motion.names,
@@ -237,7 +244,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
-        (on_copies, _), (rigid, spread), matched, regressed = estimates.result()
+        (on_copies, _), matched, regressed = estimates.result()
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point
     if probe.any():
         def on_copies_of(out):
@@ -455,6 +462,18 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
         report(f"auto: a spline through the take carries {eased} of {len(copies)} gaps more "
                f"than the other estimates")
     return out
+
+
+def _carried_closely(missing, spread, within, fps):
+    """The missing samples whose rigid donors keep within ``within`` (metres, RMS spread) of
+    them, in gaps longer than :data:`AUTO_SPLINE_SECONDS` (shorter ones are scored against a
+    spline through the take, :func:`_with_spline`, on their own copies)."""
+    shortest = round(AUTO_SPLINE_SECONDS * fps)
+    longer = np.zeros_like(missing)
+    for p, a, b in gap_runs(missing):
+        longer[a:b + 1, p] = b - a + 1 > shortest
+    with np.errstate(invalid="ignore"):
+        return longer & (spread <= within)
 
 
 def _spread_floor(missing, probe, spread):
