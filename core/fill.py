@@ -16,8 +16,8 @@ DEFAULT_METHOD = "auto"
 #: the methods that are not the project's own (what users already have, and the literature's)
 BASELINES = tuple(m for m in METHODS if m not in ("knn", "auto"))
 NEEDS_KB = ("knn", "auto", "pca")
-#: validation gaps per point for ``auto``
-AUTO_PROBES = 3
+#: validation gaps (copies of its gaps) per point for ``auto`` (tuned, docs/METHOD_NOTES.md)
+AUTO_PROBES = 5
 #: donors of ``auto``'s rigid-body estimate
 AUTO_DONORS = 3
 #: ``auto`` lets rigid partners alone carry a point whose copies they refill better than the

@@ -572,7 +572,7 @@ def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
     import time
 
     from mocap_gapfill.core import baselines, recover
-    from mocap_gapfill.core.fill import validation_gaps
+    from mocap_gapfill.core.fill import AUTO_PROBES, validation_gaps
 
     c3d = data_dir / "cmu/c3d"
     take = read_motion(c3d / "85_02.c3d")
@@ -600,7 +600,7 @@ def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
             fill(with_gaps(take, miss), "auto", kb=build_kb([c3d / "01_01.c3d"]))
     assert threading.active_count() == before
     assert beside[0] == 2 * miss.any(axis=0).sum()  # the gaps' estimates, from both ends
-    calls = 2 * (miss | validation_gaps(miss)).any(axis=0).sum()  # the copies'
+    calls = 2 * (miss | validation_gaps(miss, AUTO_PROBES)).any(axis=0).sum()  # the copies'
     assert len(points_done) - beside[0] < calls / 10  # they stopped well short of every point
     with pytest.raises(KeyboardInterrupt):
         baselines.rigid_estimates(with_gaps(take, miss).positions, should_cancel=lambda: True)
