@@ -305,9 +305,10 @@ def test_auto_refills_its_copies_with_what_rigid_partners_carry_seen(data_dir, m
     """The knowledge base fills the gaps seeing what rigid partners carry closely (within 5 mm
     on a skeleton), so the copies that weigh the methods are refilled seeing it too. Without
     that the copies of CMU 07_05 (ASF/AMC, six joints gone per second, KB of the other
-    subjects) were filled with the spine and a hand missing beside them, the knowledge base
-    looked 2-10x worse there than in the gaps, and the take's own regression and the motion
-    windows took shares they did not earn. When written: 30.0 mm, 37.5 before, `knn` 28.7."""
+    subjects) were filled with the root, spine and a hand missing beside them, the knowledge
+    base missed by 6-18x more there than in the gaps (root, hips, thorax), and the take's own
+    regression and the motion windows took shares they did not earn. When written: 30.0 mm,
+    37.5 before, `knn` 28.7."""
     from mocap_gapfill.core import fill as fill_module
     from mocap_gapfill.core.evaluate import complete_take
 
