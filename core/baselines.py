@@ -237,11 +237,7 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
             order = order[np.argsort(spread[order], kind="stable")]
             # a second copy of a donor adds nothing to its fit but a turn about the others
             kept = [j for i, j in enumerate(order) if not same[j, order[:i]].any()]
-            # spreads between the donors: only those steady enough against p can be a rigid
-            # body with it (:func:`_donors`); the other rows never count
-            steady = np.flatnonzero(spread <= RIGID_TOGETHER)
-            rows = np.array([spread_of(q) for q in steady]).reshape(len(steady), len(spread))
-            stats[p] = spread, np.array(kept, dtype=int), (steady, rows)
+            stats[p] = spread, np.array(kept, dtype=int), _mutual(spread, kept, spread_of)
         estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
         if reach:
             estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, stats[p], donors,
@@ -271,8 +267,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     """Rigid estimates of point ``p`` over its gaps ``runs`` ((first, last) frames, inclusive)
     and their donors' RMS spread, one row per gap frame in the order of ``runs`` (NaN where
     none). ``steady``: every point's spread against ``p``, the points in order of it (the
-    steadiest first), and the points within :data:`RIGID_TOGETHER` of ``p`` with every point's
-    spread against them. Per frame, ``donors`` seen there (:func:`_donors`),
+    steadiest first), and their spreads against each other (:func:`_mutual`). Per frame, ``donors`` seen there (:func:`_donors`),
     carried from the gap's ends (where the donors must be seen) or, given ``reach``, from the
     nearest frames within ``reach`` times the gap's length where ``p`` and the donors are seen;
     estimates from references either side are blended linearly across the gap. All gaps of the
@@ -284,14 +279,9 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     t = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length - a, length)
     estimate = np.full((len(t), 3), np.nan)
     rms = np.full(len(t), np.nan)
-    spread, order, (steadiest, rows_of) = steady
+    spread, order, mutual = steady
     if len(order) < donors:
         return estimate, rms
-    place = np.full(len(spread), -1)
-    place[order] = np.arange(len(order))
-    mutual = np.full((len(order),) * 2, np.inf)  # between the candidates, in their order
-    at = place[steadiest]
-    mutual[at[at >= 0]] = rows_of[at >= 0][:, order]
     # the donors each gap may take: seen at its ends, or with the point within reach of them
     before, after = a > 0, b < frames - 1
     if reach is None:
@@ -351,6 +341,19 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     estimate[rows] = found
     rms[rows] = np.sqrt(np.mean(costs ** 2, axis=1))
     return estimate, rms
+
+
+def _mutual(spread, order, spread_of):
+    """The spreads between the candidate donors ``order`` of a point (``spread``: theirs against
+    it), in that order: from ``spread_of(q)`` (every point's spread against ``q``) for those
+    within :data:`RIGID_TOGETHER` of the point, the only ones that can be a rigid body with it
+    (:func:`_donors`); inf between the others."""
+    order = np.asarray(order, dtype=int)
+    mutual = np.full((len(order),) * 2, np.inf)
+    steady = np.flatnonzero(spread[order] <= RIGID_TOGETHER)
+    for i in steady:
+        mutual[i] = spread_of(order[i])[order]
+    return mutual
 
 
 def _donors(ok, spread, mutual, donors):
