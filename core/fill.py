@@ -16,8 +16,12 @@ DEFAULT_METHOD = "auto"
 #: the methods that are not the project's own (what users already have, and the literature's)
 BASELINES = tuple(m for m in METHODS if m not in ("knn", "auto"))
 NEEDS_KB = ("knn", "auto", "pca")
-#: validation gaps (copies of its gaps) per point for ``auto`` (tuned, docs/METHOD_NOTES.md)
+#: validation gaps (copies of its gaps) per point for ``auto``, and for skeleton joints more where
+#: those hold fewer frames than ``AUTO_PROBE_FRAMES`` (five copies of 3-frame dropouts weigh the
+#: methods on 15 samples; on marker sets rigid partners carry nearly every marker with short
+#: gaps alone either way, and the extra copies only cost time: docs/METHOD_NOTES.md)
 AUTO_PROBES = 5
+AUTO_PROBE_FRAMES = 30
 #: donors of ``auto``'s rigid-body estimate
 AUTO_DONORS = 3
 #: ``auto`` lets rigid partners alone carry a point whose copies they refill better than the
@@ -193,7 +197,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     progress = progress or (lambda fraction, message: None)
     settings = settings or KnnSettings()
     missing = motion.missing
-    probe = validation_gaps(missing, AUTO_PROBES)
+    probe = validation_gaps(missing, AUTO_PROBES,
+                            least=0 if motion.parents is None else AUTO_PROBE_FRAMES)
     with np.errstate(invalid="ignore"):
         long = (probe.any(axis=0) & (_mean_run(missing) >= AUTO_MATCH_SECONDS * motion.fps)
                 & (motion.parents is not None))
@@ -493,10 +498,11 @@ def _mean_run(mask):
         return mask.sum(axis=0) / runs
 
 
-def validation_gaps(missing, per_point=3, margin=10):
+def validation_gaps(missing, per_point=3, margin=10, least=0):
     """Copies of the gaps where their points are observed: for each gap of each point, the
     nearest shift (by at least the gap's length plus ``margin``) that lands on observed frames
-    with an observed frame on either side, at most ``per_point`` per point. A gap of several
+    with an observed frame on either side, ``per_point`` per point, more where those hold fewer
+    than ``least`` frames (as long as the point has gaps to copy). A gap of several
     points at the same frames lands at the same shift for all of them when it can. Where a
     take has no room for a full-length copy of a point's gaps, half (then a quarter) of the
     length is tried, down to 4 frames."""
@@ -506,7 +512,8 @@ def validation_gaps(missing, per_point=3, margin=10):
     for shrink in (1, 2, 4):
         for p, a, b in runs:
             length = (b - a + 1) // shrink
-            if count[p] >= per_point or (shrink > 1 and count[p]) or length < min(4, b - a + 1):
+            if ((count[p] >= per_point and probe[:, p].sum() >= least)
+                    or (shrink > 1 and count[p]) or length < min(4, b - a + 1)):
                 continue
             start = _copy_start(missing[:, p] | probe[:, p], a, length, margin)
             if start is not None:
