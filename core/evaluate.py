@@ -171,7 +171,10 @@ def kb_without(kb, subject):
 def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=None,
              skip_frames=0, settings=None, exclude=(), gap_sources=(), kb_file=None,
              progress=None, report=None):
-    """Run a protocol; a list of result dicts (method, setting, test, rmse_missing_mm, ...)."""
+    """Run a protocol; a list of result dicts (method, setting, test, rmse_missing_mm, ...).
+    Where a method cannot fill a take-setting (a :class:`GapFillError`: e.g. the root gone from
+    every frame of a short take) it is reported, scored as filling nothing (inf) with the
+    message under ``error``, and the run goes on."""
     report = report or (lambda message: None)
     chosen = [s for s in settings_of(protocol, gap_sources)
               if settings is None or s[0] in settings]
@@ -192,15 +195,18 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
             query = with_gaps(truth, miss)
             for method in methods:
                 start = time.perf_counter()
-                out = fill(query, method, kb=kb,
-                           settings=KnnSettings(k=None if k is None else min(k, kb.size)))
+                try:
+                    out, failed = fill(query, method, kb=kb, settings=KnnSettings(
+                        k=None if k is None else min(k, kb.size))), {}
+                except GapFillError as error:  # e.g. a short take whose root is gone throughout:
+                    # nothing filled (every missing sample infinitely wrong), the run goes on
+                    report(f"{Path(test).name} {label} {method}: {error}")
+                    out, failed = query, {"error": str(error)}
                 seconds = time.perf_counter() - start
-                results.append({
-                    "method": method, "setting": label, "test": Path(test).name,
-                    "rmse_missing_mm": rmse_mm(out, truth, miss),
-                    "rmse_all_mm": rmse_mm(out, truth),
-                    "seconds": seconds,
-                })
+                results.append({"method": method, "setting": label, "test": Path(test).name,
+                                "rmse_missing_mm": rmse_mm(out, truth, miss),
+                                "rmse_all_mm": rmse_mm(out, truth), "seconds": seconds,
+                                **failed})
                 done += 1
                 if progress:
                     progress(done / total, f"{Path(test).name} {label} {method}")

@@ -121,6 +121,25 @@ def test_evaluate_writes_json(data_dir, tmp_path):
     assert "rate=0.1" in r.stdout
 
 
+def test_evaluate_goes_on_past_a_take_setting_a_method_cannot_fill(data_dir, tmp_path):
+    """CMU 09_05 is 69 frames at 60 fps: six joints gone for 120 frames are gone throughout,
+    the hip among them, and `knn` cannot normalise a pose without its root. The run says so
+    and goes on (every missing sample counts as infinitely wrong there); the other settings and
+    methods keep their scores, and the JSON is written."""
+    out = tmp_path / "short.json"
+    daz = data_dir / "cmu/bvh/daz_friendly"
+    r = cli("evaluate", "--protocol", "joints", "--settings", "m=6,l=120", "m=3,l=90",
+            "--skip-frames", "6", "--methods", "knn", "spline", "--test", daz / "09/09_05.bvh.gz",
+            "--kb-sources", daz / "06", "--json", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "09_05.bvh.gz m=6,l=120 knn: the root and hip points are missing" in r.stderr
+    rows = {(row["method"], row["setting"]): row for row in json.loads(out.read_text())["results"]}
+    failed = rows["knn", "m=6,l=120"]
+    assert failed["rmse_missing_mm"] == np.inf and "cannot normalise" in failed["error"]
+    assert 0 < rows["knn", "m=3,l=90"]["rmse_missing_mm"] < np.inf
+    assert "error" not in rows["knn", "m=3,l=90"] and "error" not in rows["spline", "m=6,l=120"]
+
+
 def test_evaluate_real_gaps(data_dir, tmp_path):
     """realgaps: the gaps 01_01.c3d really has (RBAC, its last 30 frames), by name, on other
     takes of the same marker set."""
