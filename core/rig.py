@@ -363,9 +363,9 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=
             centre = y[train].mean(axis=0)
             # ridge in its dual form: fewer training frames than features
             xt = x[train]
-            gram = xt @ xt.T + ridge * len(xt) * np.eye(len(xt))
+            near = x @ xt.T if kernel else None  # every frame against the training frames
+            gram = (near[train] if kernel else xt @ xt.T) + ridge * len(xt) * np.eye(len(xt))
             if kernel:
-                near = x @ xt.T
                 scale = np.trace(near[train]) / len(xt)
                 squared = np.maximum(np.sum(x ** 2, axis=1)[:, None]
                                      + np.sum(xt ** 2, axis=1)[None] - 2 * near, 0)
