@@ -294,7 +294,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         report(f"auto: windows of the knowledge base's motion join its models on "
                f"{int((windows > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
     if long.any() and (own > 0).any():
-        knn = _mix_in(knn, regress_points(motion.positions, motion.names,
+        # on the rest of the body as the knowledge base sees it (the points rigid partners carry
+        # alone included), as the copies' regression saw it
+        knn = _mix_in(knn, regress_points(given.positions, motion.names,
                                           missing & (own > 0)[None]), own)
         report(f"auto: the take's own regression on the rest of the body joins on "
                f"{int((own > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
