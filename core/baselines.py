@@ -267,11 +267,12 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     """Rigid estimates of point ``p`` over its gaps ``runs`` ((first, last) frames, inclusive)
     and their donors' RMS spread, one row per gap frame in the order of ``runs`` (NaN where
     none). ``steady``: every point's spread against ``p``, the points in order of it (the
-    steadiest first), and their spreads against each other (:func:`_mutual`). Per frame, ``donors`` seen there (:func:`_donors`),
-    carried from the gap's ends (where the donors must be seen) or, given ``reach``, from the
-    nearest frames within ``reach`` times the gap's length where ``p`` and the donors are seen;
-    estimates from references either side are blended linearly across the gap. All gaps of the
-    point are fitted at once (one batch of Kabsch fits)."""
+    steadiest first), and their spreads against each other (:func:`_mutual`). Per frame,
+    ``donors`` seen there (:func:`_donors`), carried from the gap's ends (where the donors must
+    be seen) or, given ``reach``, from the nearest frames within ``reach`` times the gap's
+    length where ``p`` and the donors are seen; estimates from references either side are
+    blended linearly across the gap. All gaps of the point are fitted at once (one batch of
+    Kabsch fits)."""
     frames = len(pos)
     a, b = np.array(runs, dtype=int).reshape(-1, 2).T
     length = b - a + 1

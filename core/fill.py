@@ -511,16 +511,18 @@ def validation_gaps(missing, per_point=3, margin=10, least=0):
     probe = np.zeros_like(missing)
     runs = sorted(gap_runs(missing), key=lambda r: (r[1], r[2], r[0]))
     count = np.zeros(missing.shape[1], dtype=int)
+    copied = np.zeros(missing.shape[1], dtype=int)  # frames
     for shrink in (1, 2, 4):
         for p, a, b in runs:
             length = (b - a + 1) // shrink
-            if ((count[p] >= per_point and probe[:, p].sum() >= least)
+            if ((count[p] >= per_point and copied[p] >= least)
                     or (shrink > 1 and count[p]) or length < min(4, b - a + 1)):
                 continue
             start = _copy_start(missing[:, p] | probe[:, p], a, length, margin)
             if start is not None:
                 probe[start:start + length, p] = True
                 count[p] += 1
+                copied[p] += length
     return probe
 
 

@@ -363,18 +363,19 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=
             centre = y[train].mean(axis=0)
             # ridge in its dual form: fewer training frames than features
             xt = x[train]
-            near = x @ xt.T if kernel else None  # every frame against the training frames
-            gram = (near[train] if kernel else xt @ xt.T) + ridge * len(xt) * np.eye(len(xt))
+            ridged = ridge * len(xt) * np.eye(len(xt))
             if kernel:
+                near = x @ xt.T  # the linear kernel, every frame against the training frames
                 scale = np.trace(near[train]) / len(xt)
                 squared = np.maximum(np.sum(x ** 2, axis=1)[:, None]
                                      + np.sum(xt ** 2, axis=1)[None] - 2 * near, 0)
                 inner = squared[train]
                 band = np.median(inner[inner > 0]) if (inner > 0).any() else 1.0
-                gram += scale * np.exp(-inner / band)
+                gram = near[train] + ridged + scale * np.exp(-inner / band)
                 pred = ((near + scale * np.exp(-squared / band))
                         @ np.linalg.solve(gram, y[train] - centre) + centre)
             else:
+                gram = xt @ xt.T + ridged
                 pred = x @ (xt.T @ np.linalg.solve(gram, y[train] - centre)) + centre
             miss = y - pred  # known at the keys either side of the gap
             span = np.arange(a, e + 1)
