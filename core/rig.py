@@ -155,20 +155,39 @@ def channels_of(matrices, modes, previous=None):
 
 
 def _compatible_euler(rot, mode, prev):
+    """Each frame's Euler angles: of the two solutions, unwrapped by whole turns onto the frame
+    before, the nearer (L1). Unwrapped, the step from one frame's pick to the next is the
+    wrapped difference of the two solutions picked, whatever the turns before: so the pick
+    depends only on the pick before (a map of {first, second} onto itself per frame), and the
+    turns add up. Both are scans over the frames, done with cumulative sums."""
     order = [("XYZ".index(a)) for a in mode]
     first = rot.as_euler(mode.lower())  # in the order of ``mode``
     second = first + np.pi
     second[:, 1] = np.pi - first[:, 1]
-    result = np.empty_like(first)
-    last = None if prev is None else np.asarray(prev)[order]
-    for f in range(len(first)):
-        if last is None:
-            pick = first[f]
-        else:
-            a = first[f] - np.round((first[f] - last) / (2 * np.pi)) * 2 * np.pi
-            b = second[f] - np.round((second[f] - last) / (2 * np.pi)) * 2 * np.pi
-            pick = b if np.abs(b - last).sum() < np.abs(a - last).sum() else a
-        result[f] = last = pick
+    both = np.stack([first, second], axis=1)  # (frames, 2, 3)
+    turn = 2 * np.pi
+    if prev is None:
+        start, turns0 = 0, 0.0
+    else:
+        lead = both[0] - np.asarray(prev, dtype=float)[order]
+        turns = np.round(lead / turn)
+        dist = np.abs(lead - turns * turn).sum(axis=1)
+        start = int(dist[1] < dist[0])
+        turns0 = turns[start]
+    step = both[1:, None, :, :] - both[:-1, :, None, :]  # [f, from, to]
+    step_turns = np.round(step / turn)
+    dist = np.abs(step - step_turns * turn).sum(axis=3)
+    to = (dist[:, :, 1] < dist[:, :, 0]).astype(np.int64)  # the pick after each pick
+    # each frame's map: keep (0), swap (1), or a fixed pick whatever came before (2 + pick)
+    kind = np.where(to[:, 0] == to[:, 1], 2 + to[:, 0], to[:, 0])
+    kind = np.concatenate([[2 + start], kind])
+    frames = np.arange(len(kind))
+    fixed = np.maximum.accumulate(np.where(kind >= 2, frames, 0))
+    swaps = np.cumsum(kind == 1)
+    pick = (kind[fixed] - 2) ^ ((swaps - swaps[fixed]) & 1)
+    turns = np.cumsum(np.concatenate([turns0 * np.ones((1, 3)),
+                                      step_turns[frames[1:] - 1, pick[:-1], pick[1:]]]), axis=0)
+    result = both[frames, pick] - turns * turn
     xyz = np.empty_like(result)
     xyz[:, order] = result
     return xyz
