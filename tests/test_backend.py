@@ -1,7 +1,9 @@
-"""Backends: torch (CPU here; CUDA where a GPU is) gives the numpy backend's neighbours and fills.
+"""Backends: torch on the CPU, and on a CUDA GPU where there is one, gives the numpy backend's
+neighbours and fills.
 
 torch is optional for users; CI installs it (torch 2.13.0, CPU) and sets
-MOCAP_GAPFILL_REQUIRE_TORCH=1 so these tests cannot skip there.
+MOCAP_GAPFILL_REQUIRE_TORCH=1 so these tests cannot skip there. The CUDA cases skip without a
+GPU (CI has none; they ran on an H200 through the device tool, docs/BENCHMARKS.md).
 """
 
 import os
@@ -34,6 +36,13 @@ def torch():
     return torch
 
 
+@pytest.fixture(params=["cpu", "cuda"])
+def device(request, torch):
+    if request.param == "cuda" and not torch.cuda.is_available():
+        pytest.skip("no CUDA GPU")
+    return request.param
+
+
 @pytest.fixture(scope="module")
 def kb(data_dir):
     return build_kb([data_dir / DAZ / s for s in ("06", "08")], fps=60, skip_frames=6)
@@ -45,13 +54,13 @@ def take(data_dir):
     return m.replace(positions=resample(m.positions, m.fps, 60.0), fps=60.0)
 
 
-def test_search_parity_on_real_poses(torch, kb, take):
+def test_search_parity_on_real_poses(device, kb, take):
     rng = np.random.default_rng(1)
     root, angle = frames_of(take.positions, kb.reference_for(take.names))
     queries = normalize(take.positions, root, angle)[:300]
     present = rng.random(queries.shape[:2]) > 0.15  # a different mask per frame
-    numpy_index, torch_index = KBIndex(kb.poses, "numpy"), KBIndex(kb.poses, "cpu")
-    assert torch_index.backend.name == "torch-cpu"
+    numpy_index, torch_index = KBIndex(kb.poses, "numpy"), KBIndex(kb.poses, device)
+    assert torch_index.backend.name == f"torch-{device}"
     idx_n, d_n = numpy_index.search(queries, present, 64)
     idx_t, d_t = torch_index.search(queries, present, 64)
     assert np.allclose(d_n, d_t, rtol=1e-6, atol=1e-9)  # same distances, nearest first
@@ -68,15 +77,17 @@ def test_search_parity_on_real_poses(torch, kb, take):
     assert np.abs(np.sort(e_n[full], axis=1) - np.sort(e_t[full], axis=1)).max() < 2e-5
 
 
-def test_fill_parity_on_real_data(torch, kb, take):
+@pytest.mark.parametrize("method", ["knn", "auto"])
+def test_fill_parity_on_real_data(device, method, kb, take):
     clip = take.frame_range(0, 600)
     miss = punch_gaps(clip.n_frames, clip.n_points, "joints", (6, 60), np.random.default_rng(0))
     query = with_gaps(clip, miss)
-    a = fill(query, "knn", kb=kb, settings=KnnSettings(k=256, device="numpy"))
-    b = fill(query, "knn", kb=kb, settings=KnnSettings(k=256, device="cpu"))
+    a = fill(query, method, kb=kb, settings=KnnSettings(k=256, device="numpy"))
+    b = fill(query, method, kb=kb, settings=KnnSettings(k=256, device=device))
     diff_mm = 1000 * np.abs(a.positions - b.positions)[miss].max()
     ra, rb = rmse_mm(a, clip, miss), rmse_mm(b, clip, miss)
-    print(f"\nnumpy {ra:.3f} mm, torch-cpu {rb:.3f} mm, largest difference {diff_mm:.4f} mm")
+    print(f"\n{method}: numpy {ra:.3f} mm, torch-{device} {rb:.3f} mm, largest difference "
+          f"{diff_mm:.4f} mm")
     assert diff_mm < 1.0 and abs(ra - rb) < 0.05
 
 

@@ -8,6 +8,7 @@ one on the gaps), ``match``, ``regress`` and ``knn`` alone, with ``slerp`` in th
 baseline (what interpolating costs).
 
 Usage: OMP_NUM_THREADS=2 .venv/bin/python tools/bench_bones.py [--repeat 3]
+[--device auto|numpy|cpu|cuda]
 """
 
 import argparse
@@ -26,6 +27,8 @@ DAZ = DATA / "cmu/bvh/daz_friendly"
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--device", default="auto", help="the search's and local models' "
+                        "backend (auto, numpy, cpu, cuda)")
     args = parser.parse_args()
     choose_blas_kernel()
     import numpy as np
@@ -34,6 +37,7 @@ def main():
     from mocap_gapfill.core.evaluate import gappable_bones
     from mocap_gapfill.core.formats.bvh import read_bvh_rig
     from mocap_gapfill.core.kb import build_kb
+    from mocap_gapfill.core.models import KnnSettings
     from mocap_gapfill.core.rig import interpolate_channels
 
     rig, channels, location, fps = read_bvh_rig(DAZ / "13/13_18.bvh.gz", skip_frames=1)
@@ -46,13 +50,14 @@ def main():
         gaps[start:start + rng.integers(30, 121), b] = True
     seen = interpolate_channels(channels, gaps)
     print(f"take: {len(channels)} frames, {len(rig.names)} bones, {int(gaps.sum())} gap frames "
-          f"on {len(bones)} gaps; KB {kb.size} poses")
+          f"on {len(bones)} gaps; KB {kb.size} poses; device {args.device}")
     times = {}
     for method in ("slerp", "regress", "match", "knn", "auto"):
         runs = []
         for _ in range(args.repeat):
             start = time.perf_counter()
-            fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method)
+            fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method,
+                       settings=KnnSettings(device=args.device))
             runs.append(time.perf_counter() - start)
         times[method] = statistics.median(runs)
         print(f"{method:6s} median {times[method]:7.3f} s over {args.repeat} runs "
