@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from . import synth
-from .evaluate import complete_take, kb_without, punch_gaps, rmse_mm, subject_of, with_gaps
+from .evaluate import (bone_errors, complete_take, kb_without, punch_gaps, rmse_mm, subject_of,
+                       with_gaps)
 from .fill import DEFAULT_METHOD, fill
 from .io import read_motion, write_motion
 from .kb import STARTER_DIR, kb_from_motions, motion_turns, starter_kb
@@ -161,15 +162,11 @@ def bone_scores(rig, channels, location, gaps, fps, kb, methods):
     from .bonefill import fill_bones
     from .rig import basis_matrices, interpolate_channels
 
-    truth = rig.joints(basis_matrices(rig, channels, location))
-    moved = rig.moved(gaps)
+    truth = basis_matrices(rig, channels, location)
     seen = interpolate_channels(channels, gaps)  # what Blender shows across the deleted keys
-    out = {}
-    for method in methods:
-        basis = fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method)
-        err = np.linalg.norm(rig.joints(basis) - truth, axis=2)[moved]
-        out[method] = float(1000 * np.sqrt((err ** 2).mean()))
-    return out
+    return {method: bone_errors(rig, fill_bones(rig, seen, location, gaps, fps, kb=kb,
+                                                method=method), truth, gaps)["rmse_missing_mm"]
+            for method in methods}
 
 
 def _real_armature(scores, report):

@@ -275,8 +275,9 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
     """Protocol ``bones``: rotation gaps on armature takes at their own frame rate, every method
     of :data:`~.bonefill.BONE_METHODS` on identical gaps, the test subject out of the KB.
 
-    Scores: RMSE in mm of the joints the gapped bones move, over the gap frames, and the mean
-    angle in degrees between each gapped bone's filled and true rotation.
+    Scores: :func:`bone_errors`. A method that cannot fill a take-setting (a
+    :class:`GapFillError`) is reported and scored inf, with the message under ``error``, as in
+    :func:`evaluate`; the run goes on.
     """
     from .bonefill import fill_bones
     from .rig import basis_matrices, interpolate_channels
@@ -292,9 +293,8 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
     for test in tests:
         rig, channels, location, fps = read_rig_take(test, skip_frames)
         kb = kb_without(full_kb, subject_of(test))
+        knn = KnnSettings(k=None if k is None else min(k, kb.size))
         truth = basis_matrices(rig, channels, location)
-        true_joints = rig.joints(truth)
-        below = rig.placed_by()
         candidates = gappable_bones(rig)
         for label, setting in chosen:
             rng = np.random.default_rng([seed, *label.encode()])
@@ -302,25 +302,39 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
             punched = punch_bone_gaps(len(channels), candidates, setting, rng)
             gaps[:, :punched.shape[1]] = punched
             seen = interpolate_channels(channels, gaps)
-            unknown = rig.moved(gaps)
             for method in methods:
                 start = time.perf_counter()
-                basis = fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method,
-                                   settings=KnnSettings(k=None if k is None else min(k, kb.size)))
+                try:
+                    basis = fill_bones(rig, seen, location, gaps, fps, kb=kb, method=method,
+                                       settings=knn)
+                    failed = None
+                except GapFillError as error:  # nothing filled: infinitely wrong; go on
+                    report(f"{Path(test).name} {label} {method}: {error}")
+                    basis, failed = None, str(error)
                 seconds = time.perf_counter() - start
-                dist = np.linalg.norm(rig.joints(basis) - true_joints, axis=2)
-                err = dist[unknown]
-                rel = np.einsum("fbji,fbjk->fbik", basis[..., :3, :3], truth[..., :3, :3])[gaps]
-                angle = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2,
-                                                     -1, 1)))
-                gap_mm = [float(1000 * np.sqrt((dist[a:e + 1, below[b]] ** 2).mean()))
-                          for b, a, e in gap_runs(gaps)]
+                scores = bone_errors(rig, basis, truth, gaps) if failed is None else {
+                    "rmse_missing_mm": np.inf, "angle_deg": np.inf,
+                    "gaps_mm": [np.inf] * len(gap_runs(gaps)), "error": failed}
                 results.append({"method": method, "setting": label, "test": Path(test).name,
-                                "rmse_missing_mm": float(1000 * np.sqrt((err ** 2).mean())),
-                                "gaps_mm": gap_mm,
-                                "angle_deg": float(angle.mean()), "seconds": seconds,
+                                **scores, "seconds": seconds,
                                 "gap_bones": int(gaps.any(axis=0).sum())})
                 done += 1
                 if progress:
                     progress(done / total, f"{Path(test).name} {label} {method}")
     return results
+
+
+def bone_errors(rig, basis, truth, gaps):
+    """How far a fill of an armature's rotation gaps is from the truth (basis matrices, both
+    (frames, bones, 4, 4); ``gaps``: (frames, bones) bool): ``rmse_missing_mm``, the RMSE in mm
+    of the joints the gapped bones move, over the gap frames; ``gaps_mm``, the same per gap
+    (:func:`gap_runs` order) over the joints below its bone; ``angle_deg``, the mean angle in
+    degrees between each gapped bone's filled and true rotation."""
+    dist = np.linalg.norm(rig.joints(basis) - rig.joints(truth), axis=2)
+    below = rig.placed_by()
+    rel = np.einsum("fbji,fbjk->fbik", basis[..., :3, :3], truth[..., :3, :3])[gaps]
+    angle = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    return {"rmse_missing_mm": float(1000 * np.sqrt((dist[rig.moved(gaps)] ** 2).mean())),
+            "gaps_mm": [float(1000 * np.sqrt((dist[a:e + 1, below[b]] ** 2).mean()))
+                        for b, a, e in gap_runs(gaps)],
+            "angle_deg": float(angle.mean())}

@@ -140,6 +140,24 @@ def test_evaluate_goes_on_past_a_take_setting_a_method_cannot_fill(data_dir, tmp
     assert "error" not in rows["knn", "m=3,l=90"] and "error" not in rows["spline", "m=6,l=120"]
 
 
+def test_evaluate_bones_goes_on_past_a_method_that_cannot_fill(data_dir, tmp_path):
+    """Protocol bones on a short Daz take against a knowledge base of C3D markers, which shares
+    no point with the armature: `match` cannot fill, and the run says so, scores it inf and goes
+    on; `interp` and `slerp`, which need no knowledge base, are scored on the same gaps."""
+    out = tmp_path / "bones.json"
+    r = cli("evaluate", "--protocol", "bones", "--settings", "n=1,l=15", "--methods", "interp",
+            "match", "slerp", "--test", data_dir / "cmu/bvh/daz_friendly/09/09_03.bvh.gz",
+            "--kb-sources", data_dir / "cmu/c3d/02_05.c3d", "--json", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "09_03.bvh.gz n=1,l=15 match: the knowledge base does not match this motion: it " \
+        "lacks 43 of its 43 points" in r.stderr
+    rows = {row["method"]: row for row in json.loads(out.read_text())["results"]}
+    assert rows["match"]["rmse_missing_mm"] == np.inf and "lacks" in rows["match"]["error"]
+    assert all(0 < rows[m]["rmse_missing_mm"] < np.inf and "error" not in rows[m]
+               for m in ("interp", "slerp"))
+    assert len(rows["interp"]["gaps_mm"]) == len(rows["match"]["gaps_mm"]) == 4  # 129 frames
+
+
 def test_evaluate_real_gaps(data_dir, tmp_path):
     """realgaps: the gaps 01_01.c3d really has (RBAC, its last 30 frames), by name, on other
     takes of the same marker set."""
