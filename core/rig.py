@@ -164,6 +164,8 @@ def _compatible_euler(rot, mode, prev):
     first = rot.as_euler(mode.lower())  # in the order of ``mode``
     second = first + np.pi
     second[:, 1] = np.pi - first[:, 1]
+    if not len(first):
+        return first
     both = np.stack([first, second], axis=1)  # (frames, 2, 3)
     turn = 2 * np.pi
     if prev is None:

@@ -3,7 +3,7 @@ neighbours and fills.
 
 torch is optional for users; CI installs it (torch 2.13.0, CPU) and sets
 MOCAP_GAPFILL_REQUIRE_TORCH=1 so these tests cannot skip there. The CUDA cases skip without a
-GPU (CI has none; they ran on an H200 through the device tool, docs/BENCHMARKS.md).
+GPU (CI has none; they ran on an H100 and an H200 through the device tool, docs/BENCHMARKS.md).
 """
 
 import os
