@@ -35,9 +35,10 @@ frames:
   placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
   ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
   ``regress`` on the pose alone and ``regress`` with a Gaussian kernel beside; in equal parts
-  in a take too short for copies, where
-  other bones' gaps overlap the gap); the shorter gaps go from ``interp`` towards their fill
-  only as far as the fills agree on the gap; with a knowledge base of positions
+  in a take too short for copies, where other bones' gaps overlap the gap); the shorter gaps go
+  from ``interp`` towards their fill only as far as the fills agree on the gap; in a take too
+  short for copies, a long gap keeps ``interp`` where it and ``regress`` agree far more closely
+  than either does with ``match``; with a knowledge base of positions
   only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees
   carried onto the knowledge base's guess from the known joints alone: a KB that holds the
   motion) stand in;
@@ -115,6 +116,10 @@ SHRINK = 1.0
 AUTO_SHARES = (0.25, 0.5, 0.75, 1.0)
 #: gaps of this many seconds or more are long (above)
 LONG_GAP = 0.5
+#: in a take without copies, a long gap keeps the interpolation where it and ``regress`` lie
+#: within this share of ``match``'s distance from the nearer of them (RMS over the joints the
+#: gap moves; :meth:`_Job._outvoted`; chosen on non-test takes, docs/METHOD_NOTES.md)
+OUTVOTED = 0.5
 #: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
 AUTO_COPIES = 3
 COPY_MARGIN = 10
@@ -465,7 +470,8 @@ class _Job:
         scored on the take's copies of other gaps; a take without any takes ``match`` on gaps
         of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all), but
         ``stack_long`` in equal parts on gaps of :data:`LONG_STACK` seconds or more
-        that gaps of other bones overlap (``match`` sees less of the body there)."""
+        that gaps of other bones overlap (``match`` sees less of the body there), and
+        interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`)."""
         rotations = self.kb.turns is not None
         if not rotations:
             self.report("auto: the knowledge base holds no bone rotations (built from markers "
@@ -533,6 +539,8 @@ class _Job:
             if any(longest):
                 made["stack_long"] = self._stacked(made, wanted, LONG_STACK_FILLS,
                                                    lambda b, a: long_table)
+            if rotations and not copies:
+                choice = self._outvoted(channels, location, wanted, seen, made, runs, choice)
         counts, partly = {}, {}
         for name, share in choice:
             counts[name] = counts.get(name, 0) + 1
@@ -548,6 +556,32 @@ class _Job:
             if name != "interp":
                 out[a:e + 1, b] = halfway(seen[a:e + 1, b:b + 1], made[name][a:e + 1, b:b + 1],
                                           np.ones((e - a + 1, 1), bool), share)[:, 0]
+        return out
+
+    def _outvoted(self, channels, location, wanted, seen, made, runs, choice):
+        """``choice`` in a take without copies, where ``match`` fills every gap of
+        :data:`LONG_GAP` seconds or more unjudged: such a gap keeps the interpolation where it
+        and ``regress`` (the take's own regression, no knowledge base) lie within
+        :data:`OUTVOTED` of ``match``'s distance from the nearer of them, over the joints the
+        gap's bone moves. Two estimates that owe each other nothing outvote the knowledge
+        base's."""
+        made.update(self.candidates(channels, location, wanted,
+                                    {"interp", "regress"} - set(made), seen))
+        world = {name: self.world(made[name]) for name in ("interp", "regress", "match")
+                 if name in made}
+        out = list(choice)
+        for i, ((b, a, e), (name, _)) in enumerate(zip(runs, choice)):
+            if name != "match" or e - a + 1 < LONG_GAP * self.fps:
+                continue
+            joints = self.moved_by(b)
+
+            def apart(x, y):
+                return np.sqrt(np.mean((world[x][a:e + 1, joints]
+                                        - world[y][a:e + 1, joints]) ** 2))
+
+            if apart("regress", "interp") < OUTVOTED * min(apart(name, "interp"),
+                                                           apart(name, "regress")):
+                out[i] = ("interp", 0.0)
         return out
 
     def _doubted(self, made, runs, choice):

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from mocap_gapfill.core import bonefill, stacking
 from mocap_gapfill.core.bonefill import carry_subtrees, fill_bones, gap_copies
 from mocap_gapfill.core.errors import GapFillError, ParseError
-from mocap_gapfill.core.evaluate import kb_without
+from mocap_gapfill.core.evaluate import bone_errors, kb_without
 from mocap_gapfill.core.formats.asfamc import parse_asf
 from mocap_gapfill.core.formats.bvh import read_bvh_rig
 from mocap_gapfill.core.io import read_motion, read_rig_take
@@ -172,6 +172,31 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, daz
         print(f"\n07_05, gaps of {length} frames: auto {1000 * rmse[0]:.1f} mm, "
               f"interpolation {1000 * rmse[1]:.1f} mm, {worse} gaps worse")
         assert rmse[0] < rmse[1] * (1.0 if length == 30 else 0.7)
+
+
+def test_auto_in_a_take_without_copies_keeps_the_interpolation_where_it_and_regress_agree(
+        data_dir):
+    """CMU 13_35 (10 s) with the left thigh's keys deleted over two 2 s stretches: no copy of
+    such a gap fits between them, so `auto` takes `match` unjudged. On the second gap `match`
+    is 153 mm off while Blender's interpolation (78 mm) and the take's own regression (53 mm)
+    agree with each other: `auto` keeps the interpolation there. On the first they disagree
+    (266 and 146 mm) and `match` (85 mm) stays. Knowledge base: every other Daz subject at 60
+    poses a second, as the bones protocol builds it."""
+    rig, channels, location, fps = read_bvh_rig(data_dir / "cmu/bvh/daz_friendly/13/13_35.bvh.gz",
+                                                skip_frames=6)
+    kb = build_kb([data_dir / "cmu/bvh/daz_friendly"], fps=60, skip_frames=6,
+                  exclude=["*/13/*"])
+    gaps = np.zeros(channels.shape[:2], dtype=bool)
+    gaps[240:480, rig.names.index("lThigh")] = gaps[720:960, rig.names.index("lThigh")] = True
+    assert not gap_copies(gaps, bonefill.AUTO_COPIES, bonefill.COPY_MARGIN)
+    seen = interpolate_channels(channels, gaps)
+    truth = basis_matrices(rig, channels, location)
+    mm = {method: bone_errors(rig, fill_bones(rig, seen, location, gaps, fps, kb=kb,
+                                              method=method), truth, gaps)["gaps_mm"]
+          for method in ("auto", "interp", "match", "regress")}
+    assert mm["auto"][1] == mm["interp"][1] < 0.6 * mm["match"][1]
+    assert abs(mm["auto"][0] - mm["match"][0]) < 1e-3 and mm["match"][0] < 0.5 * mm["interp"][0]
+    assert mm["regress"][1] < mm["interp"][1] < mm["regress"][0] < mm["interp"][0]
 
 
 def test_root_gaps_and_bad_input(walk, daz_kb):
