@@ -359,7 +359,7 @@ def _with_spline_ends(motion, out, copies, probe, spline, rigid_alone, report):
     take) do not show how a spline strays over it."""
     from .stacking import DISTANCES, classes
 
-    shortest = round(AUTO_SPLINE_SECONDS * motion.fps)
+    shortest = _spline_frames(motion.fps)
     gaps = [(p, a, b) for p, a, b in gap_runs(motion.missing)
             if a > 0 and b < len(out) - 1 and b - a + 1 > shortest]
     if not gaps:  # e.g. a take of short dropouts only: no spline of the copies to make
@@ -433,7 +433,7 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     rounds, copies = np.zeros((AUTO_SPLINE_COPIES,) + missing.shape, bool), []
     for p, a, b in gap_runs(missing):
         if (a == 0 or b == len(missing) - 1 or not np.isfinite(e_out[p])
-                or b - a + 1 > round(AUTO_SPLINE_SECONDS * motion.fps)):
+                or b - a + 1 > _spline_frames(motion.fps)):
             continue
         length, own, starts = b - a + 1, missing[:, p].copy(), []
         for k, hidden in enumerate(rounds):
@@ -471,11 +471,17 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     return out
 
 
+def _spline_frames(fps):
+    """The longest gap (frames) that ``auto`` scores against a spline through the take:
+    :data:`AUTO_SPLINE_SECONDS`."""
+    return round(AUTO_SPLINE_SECONDS * fps)
+
+
 def _carried_closely(missing, spread, within, fps):
     """The missing samples whose rigid donors keep within ``within`` (metres, RMS spread) of
     them, in gaps longer than :data:`AUTO_SPLINE_SECONDS` (shorter ones are scored against a
     spline through the take, :func:`_with_spline`, on their own copies)."""
-    shortest = round(AUTO_SPLINE_SECONDS * fps)
+    shortest = _spline_frames(fps)
     longer = np.zeros_like(missing)
     for p, a, b in gap_runs(missing):
         longer[a:b + 1, p] = b - a + 1 > shortest
