@@ -565,22 +565,24 @@ class _Job:
         :data:`OUTVOTED` of ``match``'s distance from the nearer of them, over the joints the
         gap's bone moves. Two estimates that owe each other nothing outvote the knowledge
         base's."""
-        made.update(self.candidates(channels, location, wanted,
-                                    {"interp", "regress"} - set(made), seen))
-        world = {name: self.world(made[name]) for name in ("interp", "regress", "match")
-                 if name in made}
+        judged = [i for i, ((_, a, e), (name, _)) in enumerate(zip(runs, choice))
+                  if name == "match" and e - a + 1 >= LONG_GAP * self.fps]
+        if not judged:
+            return choice
+        fills = {**made, **self.candidates(channels, location, wanted,
+                                           {"interp", "regress"} - set(made), seen)}
+        world = {name: self.world(fills[name]) for name in ("interp", "regress", "match")}
         out = list(choice)
-        for i, ((b, a, e), (name, _)) in enumerate(zip(runs, choice)):
-            if name != "match" or e - a + 1 < LONG_GAP * self.fps:
-                continue
+        for i in judged:
+            b, a, e = runs[i]
             joints = self.moved_by(b)
 
             def apart(x, y):
                 return np.sqrt(np.mean((world[x][a:e + 1, joints]
                                         - world[y][a:e + 1, joints]) ** 2))
 
-            if apart("regress", "interp") < OUTVOTED * min(apart(name, "interp"),
-                                                           apart(name, "regress")):
+            if apart("regress", "interp") < OUTVOTED * min(apart("match", "interp"),
+                                                           apart("match", "regress")):
                 out[i] = ("interp", 0.0)
         return out
 
