@@ -35,7 +35,9 @@ frames:
   placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
   ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
   ``regress`` on the pose alone and ``regress`` with a Gaussian kernel beside; in equal parts
-  in a take too short for copies, where other bones' gaps overlap the gap); the shorter gaps go
+  in a take too short for copies, where other bones' gaps overlap the gap), and so do gaps of
+  ``FEW_COPIES`` seconds or more that fewer than ``AUTO_COPIES`` copies of their own fit
+  beside; the shorter gaps go
   from ``interp`` towards their fill only as far as the fills agree on the gap; in a take too
   short for copies, a long gap keeps ``interp`` where it and ``regress`` agree far more closely
   than either does with ``match``; with a knowledge base of positions
@@ -122,6 +124,10 @@ LONG_GAP = 0.5
 OUTVOTED = 0.5
 #: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
 AUTO_COPIES = 3
+#: a gap of this many seconds or more that fewer than :data:`AUTO_COPIES` copies of its own fit
+#: takes ``stack_long``: the take's other copies do not speak for it (chosen on non-test
+#: takes, docs/METHOD_NOTES.md)
+FEW_COPIES = 1.5
 COPY_MARGIN = 10
 #: ``hermite`` carries the velocities at a gap's ends as if the gap lasted at most this long
 HERMITE_SECONDS = 0.5
@@ -465,7 +471,9 @@ class _Job:
         length, where the bone is keyed - best, if they do so below :data:`PROMOTE` of
         interpolation's error (short gaps: :data:`PROMOTE_SHORT`, all the way only below
         :data:`PROMOTE_SHORT_WHOLE`); interpolation otherwise, or ``stack_long`` on gaps of
-        :data:`LONG_STACK` seconds or more; the share of any gap shorter than that cut where
+        :data:`LONG_STACK` seconds or more (and on gaps of :data:`FEW_COPIES` seconds or more
+        with fewer than :data:`AUTO_COPIES` copies of their own); the share of any gap shorter
+        than :data:`LONG_STACK` cut where
         the fills disagree on the gap (:meth:`_doubted`). A gap without copies is
         scored on the take's copies of other gaps; a take without any takes ``match`` on gaps
         of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all), but
@@ -527,6 +535,8 @@ class _Job:
                     PROMOTE if long else PROMOTE_SHORT_WHOLE if key[1] == 1 else PROMOTE_SHORT)}
                 choice[i] = (min(passed, key=passed.get) if passed else
                              ("stack_long", 1.0) if longest[i] else ("interp", 0.0))
+                if longest[i] and own.sum() < AUTO_COPIES and e - a + 1 >= FEW_COPIES * self.fps:
+                    choice[i] = ("stack_long", 1.0)  # too few copies of its own to judge by
         wanted = np.zeros_like(gaps)
         for (b, a, e), (name, _) in zip(runs, choice):
             wanted[a:e + 1, b] = name != "interp"

@@ -174,8 +174,15 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, daz
         assert rmse[0] < rmse[1] * (1.0 if length == 30 else 0.7)
 
 
+@pytest.fixture(scope="module")
+def kb_without_13(data_dir):
+    """Every Daz-friendly subject but 13 at 60 poses a second, as the bones protocol builds it."""
+    return build_kb([data_dir / "cmu/bvh/daz_friendly"], fps=60, skip_frames=6,
+                    exclude=["*/13/*"])
+
+
 def test_auto_in_a_take_without_copies_keeps_the_interpolation_where_it_and_regress_agree(
-        data_dir):
+        data_dir, kb_without_13):
     """CMU 13_35 (10 s) with the left thigh's keys deleted over two 2 s stretches: no copy of
     such a gap fits between them, so `auto` takes `match` unjudged. On the second gap `match`
     is 153 mm off while Blender's interpolation (78 mm) and the take's own regression (53 mm)
@@ -184,8 +191,7 @@ def test_auto_in_a_take_without_copies_keeps_the_interpolation_where_it_and_regr
     poses a second, as the bones protocol builds it."""
     rig, channels, location, fps = read_bvh_rig(data_dir / "cmu/bvh/daz_friendly/13/13_35.bvh.gz",
                                                 skip_frames=6)
-    kb = build_kb([data_dir / "cmu/bvh/daz_friendly"], fps=60, skip_frames=6,
-                  exclude=["*/13/*"])
+    kb = kb_without_13
     gaps = np.zeros(channels.shape[:2], dtype=bool)
     gaps[240:480, rig.names.index("lThigh")] = gaps[720:960, rig.names.index("lThigh")] = True
     assert not gap_copies(gaps, bonefill.AUTO_COPIES, bonefill.COPY_MARGIN)
@@ -197,6 +203,38 @@ def test_auto_in_a_take_without_copies_keeps_the_interpolation_where_it_and_regr
     assert mm["auto"][1] == mm["interp"][1] < 0.6 * mm["match"][1]
     assert abs(mm["auto"][0] - mm["match"][0]) < 1e-3 and mm["match"][0] < 0.5 * mm["interp"][0]
     assert mm["regress"][1] < mm["interp"][1] < mm["regress"][0] < mm["interp"][0]
+
+
+def test_auto_fills_a_long_gap_with_too_few_copies_of_its_own_from_the_long_stack(
+        data_dir, kb_without_13, monkeypatch):
+    """CMU 13_37 (12 s) with the left thigh's keys deleted over two 2 s stretches and the
+    head's over a third (the bones protocol's gaps, n=1, l=240): one copy of the first thigh
+    gap fits the take and none of the second, so their verdicts leaned on the head's copies and
+    took `stack` three-quarters and half of the way (143 and 137 mm; interpolation 278 and
+    188). With too few copies of their own those gaps now take `stack_long` (73 and 59 mm);
+    the head's gap, three copies of its own, keeps its verdict."""
+    rig, channels, location, fps = read_bvh_rig(data_dir / "cmu/bvh/daz_friendly/13/13_37.bvh.gz",
+                                                skip_frames=6)
+    gaps = np.zeros(channels.shape[:2], dtype=bool)
+    thigh, head = rig.names.index("lThigh"), rig.names.index("head")
+    gaps[240:480, thigh] = gaps[720:960, thigh] = gaps[1200:1440, head] = True
+    own = [sum(c[0] == i for c in gap_copies(gaps, bonefill.AUTO_COPIES, bonefill.COPY_MARGIN))
+           for i in range(3)]
+    assert own == [3, 1, 0]  # gap_runs order: the head's gap first
+    seen = interpolate_channels(channels, gaps)
+    truth = basis_matrices(rig, channels, location)
+
+    def mm(method):
+        return bone_errors(rig, fill_bones(rig, seen, location, gaps, fps, kb=kb_without_13,
+                                           method=method), truth, gaps)["gaps_mm"]
+
+    auto, interp = mm("auto"), mm("interp")
+    monkeypatch.setattr(bonefill, "FEW_COPIES", np.inf)
+    judged = mm("auto")
+    print(f"\n13_37: auto {np.round(auto, 1)} mm, on the copies' verdict {np.round(judged, 1)}, "
+          f"interpolation {np.round(interp, 1)}")
+    assert auto[0] == judged[0]
+    assert all(auto[g] < 0.6 * judged[g] and auto[g] < 0.4 * interp[g] for g in (1, 2))
 
 
 def test_root_gaps_and_bad_input(walk, daz_kb):
