@@ -119,6 +119,18 @@ def read_rig_take(path, skip_frames=0, asf=None):
     return (*rig_from_motion(motion), motion.fps)
 
 
+def read_rig_basis(path, skip_frames=0, asf=None):
+    """:func:`read_rig_take`'s armature with its pose as basis matrices (frames, bones, 4, 4):
+    ``(rig, basis, fps)``; a BVH's straight from its rotations, without Blender's channels."""
+    from .formats.bvh import read_bvh_basis
+    from .rig import basis_matrices
+
+    if file_suffix(path) in (".bvh", ".bvh.gz"):
+        return read_bvh_basis(path, skip_frames=skip_frames)
+    rig, channels, location, fps = read_rig_take(path, skip_frames, asf)
+    return rig, basis_matrices(rig, channels, location), fps
+
+
 @contextmanager
 def atomic_output(path, overwrite=False):
     """A temporary path beside ``path`` to write to; renamed onto ``path`` when the block ends

@@ -18,7 +18,7 @@ import numpy as np
 from .errors import GapFillError, ParseError
 from .formats.tabular import load_arrays, scalar, strings
 from .io import (READ_FORMATS, RIG_FORMATS, atomic_output, file_suffix, read_motion,
-                 read_rig_take)
+                 read_rig_basis)
 from .normalize import find_reference, frames_of, normalize
 from .upright import upright_warning
 
@@ -247,12 +247,10 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
 def take_turns(path, skip_frames, n_frames, asf=None):
     """:func:`rig_turns` of an armature take file; None where the armature's frames are not
     the motion's."""
-    from .rig import basis_matrices
-
-    rig, channels, location, _ = read_rig_take(path, skip_frames, asf)
-    if len(channels) != n_frames:
+    rig, basis, _ = read_rig_basis(path, skip_frames, asf)
+    if len(basis) != n_frames:
         return None
-    return rig_turns(rig, basis_matrices(rig, channels, location))
+    return rig_turns(rig, basis)
 
 
 def motion_turns(motion):

@@ -272,7 +272,17 @@ def read_bvh_rig(path, units=None, skip_frames=0):
     heads = the joints :func:`read_bvh` gives), and per frame the rotation channels
     (frames, bones, 4) and location channels (frames, bones, 3) Blender keys.
     """
-    from ..rig import Rig, bone_matrix, channels_of
+    from ..rig import channels_of
+
+    rig, basis, fps = read_bvh_basis(path, units, skip_frames)
+    channels = channels_of(basis[..., :3, :3], rig.modes, previous=np.zeros((len(rig.names), 4)))
+    return rig, channels, np.ascontiguousarray(basis[..., :3, 3]), fps
+
+
+def read_bvh_basis(path, units=None, skip_frames=0):
+    """:func:`read_bvh_rig`'s armature with its pose as basis matrices (frames, bones, 4, 4)
+    rather than channels: ``(rig, basis, fps)``, what a knowledge base keeps of the take."""
+    from ..rig import Rig, bone_matrix
 
     bvh = parse_bvh(path)
     units = units or guess_units(bvh)
@@ -292,8 +302,8 @@ def read_bvh_rig(path, units=None, skip_frames=0):
     to_z_up[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
     rest, modes, parents = [], [], []
     frames = values.shape[0]
-    basis_rot = np.empty((frames, len(keep), 3, 3))
-    location = np.zeros((frames, len(keep), 3))
+    basis = np.zeros((frames, len(keep), 4, 4))
+    basis[..., 3, 3] = 1.0
     for new, j in enumerate(keep):
         joint = joints[j]
         kids = [c for c, child in enumerate(joints) if child.parent == j]
@@ -312,15 +322,14 @@ def read_bvh_rig(path, units=None, skip_frames=0):
         modes.append(axes.upper() if len(axes) == 3 and len(set(axes)) == 3 else "XYZ")
         cols = [joint.first_channel + k for k, c in enumerate(joint.channels) if c in _ROT]
         local = compose(axes, [np.deg2rad(values[:, c]) for c in cols])
-        basis_rot[:, new] = rot.T @ local @ rot
+        basis[:, new, :3, :3] = rot.T @ local @ rot
         moved = np.zeros((frames, 3))
         for k, c in enumerate(joint.channels):
             if c in _POS:
                 moved[:, _POS[c]] = values[:, joint.first_channel + k] * scale
         if any(c in _POS for c in joint.channels):
-            location[:, new] = (moved - joint.offset * scale) @ rot
+            basis[:, new, :3, 3] = (moved - joint.offset * scale) @ rot
         rest.append(to_z_up @ bone)
         parents.append(remap.get(joint.parent, -1))
     rig = Rig(tuple(joints[j].name for j in keep), tuple(parents), np.array(rest), tuple(modes))
-    channels = channels_of(basis_rot, rig.modes, previous=np.zeros((len(keep), 4)))
-    return rig, channels, location, snap_fps(1.0 / bvh.frame_time)
+    return rig, basis, snap_fps(1.0 / bvh.frame_time)
