@@ -13,7 +13,7 @@ from mocap_gapfill.core.errors import GapFillError, ParseError
 from mocap_gapfill.core.evaluate import bone_errors, kb_without
 from mocap_gapfill.core.formats.asfamc import parse_asf
 from mocap_gapfill.core.formats.bvh import read_bvh_rig
-from mocap_gapfill.core.io import read_motion, read_rig_take
+from mocap_gapfill.core.io import read_motion, read_rig_basis, read_rig_take
 from mocap_gapfill.core.kb import build_kb, load_kb
 from mocap_gapfill.core.matching import match_windows
 from mocap_gapfill.core.motion import gap_runs, y_up_to_z_up
@@ -38,10 +38,15 @@ def daz_kb(daz_rotation_kb):
 @pytest.mark.parametrize("path", [WALK, "cmu/asfamc/07/07_05.amc"])
 def test_rigs_place_the_readers_joints(data_dir, path):
     rig, channels, location, fps = read_rig_take(data_dir / path, skip_frames=6)
-    joints = rig.joints(basis_matrices(rig, channels, location))
+    basis = basis_matrices(rig, channels, location)
+    joints = rig.joints(basis)
     truth = read_motion(data_dir / path, skip_frames=6).positions
     assert fps == 120 and joints.shape == truth.shape
     assert np.abs(joints - truth).max() < 1e-6
+    # what a knowledge base keeps: the same pose without the channels (BVH: straight from the
+    # file's rotations)
+    same, direct, rate = read_rig_basis(data_dir / path, skip_frames=6)
+    assert same.names == rig.names and rate == fps and np.abs(direct - basis).max() < 1e-12
 
 
 def test_channels_round_trip_continuously(walk):
