@@ -215,8 +215,8 @@ def test_auto_fills_a_long_gap_with_too_few_copies_of_its_own_from_the_long_stac
     """CMU 13_37 (12 s) with the left thigh's keys deleted over two 2 s stretches and the
     head's over a third (the bones protocol's gaps, n=1, l=240): one copy of the first thigh
     gap fits the take and none of the second, so their verdicts leaned on the head's copies and
-    took `stack` three-quarters and half of the way (143 and 137 mm; interpolation 278 and
-    188). With too few copies of their own those gaps now take `stack_long` (73 and 59 mm);
+    took `stack` three-quarters and half of the way (145 and 135 mm; interpolation 278 and
+    188). With too few copies of their own those gaps now take `stack_long` (74 and 58 mm);
     the head's gap, three copies of its own, keeps its verdict."""
     rig, channels, location, fps = read_bvh_rig(data_dir / "cmu/bvh/daz_friendly/13/13_37.bvh.gz",
                                                 skip_frames=6)
