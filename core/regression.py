@@ -4,9 +4,10 @@ Where a limb is gone for seconds, the points still seen say much about it on thi
 a walk's arm swings against its legs, a dancer's free hand follows the rest of the figure. No
 knowledge base holds that subject; the take's own frames where the point is seen do. Per gap, a
 ridge regression (in the body's frame, :mod:`.normalize`) of the point on every point seen
-throughout the gap, fitted on the frames where all of them are seen, predicts the gap; the
-prediction's miss at the observations either side is blended across it
-(:func:`~.motion.blend_into_gaps`), so the fill meets both ends.
+throughout the gap, fitted on the frames where all of them are seen, with a Gaussian kernel
+beside the linear one (so the point may follow the others in a curve, as the armatures'
+``regress_kernel`` does), predicts the gap; the prediction's miss at the observations either
+side is blended across it (:func:`~.motion.blend_into_gaps`), so the fill meets both ends.
 """
 
 import numpy as np
@@ -27,6 +28,12 @@ SCALE_FLOOR = 0.01
 MARGIN = 0.1
 #: fewest training frames
 LEAST = 20
+#: weight of the Gaussian kernel beside the linear one, as a share of the linear kernel's mean
+#: (its bandwidth: the median squared distance between training frames); at most
+#: ``KERNEL_FRAMES`` training frames, evenly spaced over those of the take (tuned on non-test
+#: takes, docs/METHOD_NOTES.md, session 32)
+KERNEL = 0.3
+KERNEL_FRAMES = 800
 
 
 def regress_points(positions, names, only=None):
@@ -55,19 +62,36 @@ def regress_points(positions, names, only=None):
         train = np.flatnonzero(seen[:, p] & seen[:, partners].all(axis=1))
         if not partners.any() or len(train) < LEAST:
             continue
+        if len(train) > KERNEL_FRAMES:
+            train = train[np.linspace(0, len(train) - 1, KERNEL_FRAMES).round().astype(int)]
         x = local[:, partners].reshape(n_frames, -1)
         mean = x[train].mean(axis=0)
         scale = np.maximum(x[train].std(axis=0), SCALE_FLOOR)
         xs = (x - mean) / scale
         y = local[train, p]
         centre = y.mean(axis=0)
-        gram = xs[train].T @ xs[train] + RIDGE * len(train) * np.eye(xs.shape[1])
-        coef = np.linalg.solve(gram, xs[train].T @ (y - centre))
         span = np.arange(lo, hi + 1)
+        pred[span, p] = _kernel_ridge(xs[train], y - centre, xs[span]) + centre
         low, high = y.min(axis=0), y.max(axis=0)
         pad = MARGIN * (high - low)
-        pred[span, p] = np.clip(xs[span] @ coef + centre, low - pad, high + pad)
+        pred[span, p] = np.clip(pred[span, p], low - pad, high + pad)
         wanted[a:b + 1, p] = True
     world = denormalize(pred, root, angle)
     return blend_into_gaps(np.where(wanted[..., None], np.nan, pos), world, wanted,
                            widened(wanted))
+
+
+def _kernel_ridge(train, y, query):
+    """Ridge regression in its dual form with the linear kernel plus :data:`KERNEL` times a
+    Gaussian one: predictions at ``query`` (rows) of ``y`` known at ``train`` (rows)."""
+    def kernels(a, linear):
+        squared = np.maximum(np.sum(a ** 2, axis=1)[:, None] + np.sum(train ** 2, axis=1)[None]
+                             - 2 * linear, 0.0)
+        return linear, squared
+
+    linear, squared = kernels(train, train @ train.T)
+    weight = KERNEL * np.trace(linear) / len(train)
+    band = np.median(squared[squared > 0]) if (squared > 0).any() else 1.0
+    gram = linear + weight * np.exp(-squared / band) + RIDGE * len(train) * np.eye(len(train))
+    near, far = kernels(query, query @ train.T)
+    return (near + weight * np.exp(-far / band)) @ np.linalg.solve(gram, y)
