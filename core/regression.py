@@ -71,7 +71,9 @@ def regress_points(positions, names, only=None):
         y = local[train, p]
         centre = y.mean(axis=0)
         span = np.arange(lo, hi + 1)
-        pred[span, p] = _kernel_ridge(xs[train], y - centre, xs[span]) + centre
+        rows = np.concatenate([train, span])
+        fit = kernel_ridge(xs[rows], np.arange(len(train)), y - centre, KERNEL, RIDGE)
+        pred[span, p] = fit[len(train):] + centre
         low, high = y.min(axis=0), y.max(axis=0)
         pad = MARGIN * (high - low)
         pred[span, p] = np.clip(pred[span, p], low - pad, high + pad)
@@ -81,17 +83,21 @@ def regress_points(positions, names, only=None):
                            widened(wanted))
 
 
-def _kernel_ridge(train, y, query):
-    """Ridge regression in its dual form with the linear kernel plus :data:`KERNEL` times a
-    Gaussian one: predictions at ``query`` (rows) of ``y`` known at ``train`` (rows)."""
-    def kernels(a, linear):
-        squared = np.maximum(np.sum(a ** 2, axis=1)[:, None] + np.sum(train ** 2, axis=1)[None]
-                             - 2 * linear, 0.0)
-        return linear, squared
-
-    linear, squared = kernels(train, train @ train.T)
-    weight = KERNEL * np.trace(linear) / len(train)
-    band = np.median(squared[squared > 0]) if (squared > 0).any() else 1.0
-    gram = linear + weight * np.exp(-squared / band) + RIDGE * len(train) * np.eye(len(train))
-    near, far = kernels(query, query @ train.T)
-    return (near + weight * np.exp(-far / band)) @ np.linalg.solve(gram, y)
+def kernel_ridge(x, train, y, weight, ridge):
+    """Ridge regression in its dual form: predictions at every row of ``x`` of ``y``, known at
+    its rows ``train``; ``ridge`` the penalty per training row; ``weight`` (0: linear alone)
+    that of a Gaussian kernel beside the linear one, as a share of the linear kernel's mean,
+    with the median squared distance between training rows as its bandwidth. Shared with the
+    armatures' regression (:func:`~.rig.regress_channels`)."""
+    xt = x[train]
+    ridged = ridge * len(xt) * np.eye(len(xt))
+    if not weight:
+        return x @ (xt.T @ np.linalg.solve(xt @ xt.T + ridged, y))
+    near = x @ xt.T  # the linear kernel, every row against the training rows
+    scale = weight * np.trace(near[train]) / len(xt)
+    squared = np.maximum(np.sum(x ** 2, axis=1)[:, None] + np.sum(xt ** 2, axis=1)[None]
+                         - 2 * near, 0)
+    inner = squared[train]
+    band = np.median(inner[inner > 0]) if (inner > 0).any() else 1.0
+    gram = near[train] + ridged + scale * np.exp(-inner / band)
+    return (near + scale * np.exp(-squared / band)) @ np.linalg.solve(gram, y)

@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 
 from .errors import GapFillError
 from .posing import forward
+from .regression import kernel_ridge
 
 EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 ROTATION_MODES = EULER_ORDERS + ("QUATERNION", "AXIS_ANGLE")
@@ -383,21 +384,8 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=
             y = out[rows, b]
             centre = y[train].mean(axis=0)
             # ridge in its dual form: fewer training frames than features
-            xt = x[train]
-            ridged = ridge * len(xt) * np.eye(len(xt))
-            if kernel:
-                near = x @ xt.T  # the linear kernel, every frame against the training frames
-                scale = np.trace(near[train]) / len(xt)
-                squared = np.maximum(np.sum(x ** 2, axis=1)[:, None]
-                                     + np.sum(xt ** 2, axis=1)[None] - 2 * near, 0)
-                inner = squared[train]
-                band = np.median(inner[inner > 0]) if (inner > 0).any() else 1.0
-                gram = near[train] + ridged + scale * np.exp(-inner / band)
-                pred = ((near + scale * np.exp(-squared / band))
-                        @ np.linalg.solve(gram, y[train] - centre) + centre)
-            else:
-                gram = xt @ xt.T + ridged
-                pred = x @ (xt.T @ np.linalg.solve(gram, y[train] - centre)) + centre
+            pred = kernel_ridge(x, train, y[train] - centre, 1.0 if kernel else 0.0,
+                                ridge) + centre
             miss = y - pred  # known at the keys either side of the gap
             span = np.arange(a, e + 1)
             ends = np.array([a - 1, e + 1])
