@@ -37,11 +37,10 @@ frames:
   ``regress`` on the pose alone and ``regress`` with a Gaussian kernel beside; in equal parts
   in a take too short for copies, where other bones' gaps overlap the gap), and so do gaps of
   ``FEW_COPIES`` seconds or more that fewer than ``AUTO_COPIES`` copies of their own fit
-  beside; the shorter gaps go
-  from ``interp`` towards their fill only as far as the fills agree on the gap; in a take too
-  short for copies, a long gap keeps ``interp`` where it and ``regress`` agree far more closely
-  than either does with ``match``; with a knowledge base of positions
-  only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees
+  beside; the shorter gaps go from ``interp`` towards their fill only as far as the fills
+  agree on the gap; in a take too short for copies, a long gap keeps ``interp`` where it and
+  ``regress`` agree far more closely than either does with ``match``; with a knowledge base
+  of positions only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees
   carried onto the knowledge base's guess from the known joints alone: a KB that holds the
   motion) stand in;
 - ``slerp``: quaternion slerp between the rotations at the keys either side;
@@ -473,8 +472,8 @@ class _Job:
         :data:`PROMOTE_SHORT_WHOLE`); interpolation otherwise, or ``stack_long`` on gaps of
         :data:`LONG_STACK` seconds or more (and on gaps of :data:`FEW_COPIES` seconds or more
         with fewer than :data:`AUTO_COPIES` copies of their own); the share of any gap shorter
-        than :data:`LONG_STACK` cut where
-        the fills disagree on the gap (:meth:`_doubted`). A gap without copies is
+        than :data:`LONG_STACK` cut where the fills disagree on the gap (:meth:`_doubted`).
+        A gap without copies is
         scored on the take's copies of other gaps; a take without any takes ``match`` on gaps
         of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all), but
         ``stack_long`` in equal parts on gaps of :data:`LONG_STACK` seconds or more

@@ -71,12 +71,12 @@ def regress_points(positions, names, only=None):
         y = local[train, p]
         centre = y.mean(axis=0)
         span = np.arange(lo, hi + 1)
-        rows = np.concatenate([train, span])
-        fit = kernel_ridge(xs[rows], np.arange(len(train)), y - centre, KERNEL, RIDGE)
-        pred[span, p] = fit[len(train):] + centre
+        # one system for the training frames and the gap's: the former make the Gram matrix
+        fit = kernel_ridge(xs[np.concatenate([train, span])], np.arange(len(train)),
+                           y - centre, KERNEL, RIDGE)[len(train):] + centre
         low, high = y.min(axis=0), y.max(axis=0)
         pad = MARGIN * (high - low)
-        pred[span, p] = np.clip(pred[span, p], low - pad, high + pad)
+        pred[span, p] = np.clip(fit, low - pad, high + pad)
         wanted[a:b + 1, p] = True
     world = denormalize(pred, root, angle)
     return blend_into_gaps(np.where(wanted[..., None], np.nan, pos), world, wanted,
