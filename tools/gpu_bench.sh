@@ -30,7 +30,10 @@ for device in cuda cpu; do
     step 90 engine.log $PY tools/bench_engine.py --stage "$stage" --device "$device" --repeat 3
   done
 done
-step 240 bench.log $PY -m mocap_gapfill bench --quick --repeat 3 --json "$OUT/bench_quick.json"
+# the search benchmark (SEARCH=0 leaves it out where only the fills changed)
+if [ "${SEARCH:-1}" = 1 ]; then
+  step 240 bench.log $PY -m mocap_gapfill bench --quick --repeat 3 --json "$OUT/bench_quick.json"
+fi
 for device in cuda cpu; do
   step 120 bones.log $PY tools/bench_bones.py --repeat 2 --device "$device"
 done
