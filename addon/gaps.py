@@ -68,14 +68,15 @@ def detect(owner, scene, suspects=True, jump_factor=8.0):
             flagged = bridge.blame_bones(take, flagged)
         suspect = flagged & ~missing
     settings = owner.mocap_gapfill
-    marked = [(g.point, g.first, g.last, g.kind, g.filled) for g in settings.gaps
-              if g.kind == "MARKED"]
+    marked = [(g.point, g.first, g.last, g.kind, g.filled, g.how, g.estimate)
+              for g in settings.gaps if g.kind == "MARKED"]
     settings.gaps.clear()
     for kind, mask in (("MISSING", missing), ("SUSPECT", suspect)):
         for j, a, b in gap_runs(mask):
             _add_gap(settings, take.points[j], take.first + a, take.first + b, kind)
-    for point, first, last, kind, filled in marked:
-        _add_gap(settings, point, first, last, kind).filled = filled
+    for point, first, last, kind, filled, how, estimate in marked:
+        gap = _add_gap(settings, point, first, last, kind)
+        gap.filled, gap.how, gap.estimate = filled, how, estimate
     settings.gap_index = -1 if not len(settings.gaps) else min(settings.gap_index, 0)
     update_stats(owner, take.points, take.first, take.positions.shape[0])
     return take
@@ -179,7 +180,8 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
               device="auto"):
     """Read the takes and return ``(plans, work)``: ``work(progress, should_cancel)`` fills them
     on plain arrays and returns per plan the filled positions (None for armatures filled in
-    rotation space) and, for armatures, the solved basis matrices.
+    rotation space), for armatures the solved basis matrices, and for armatures filled in
+    rotation space how each gap was filled (:class:`~..core.bonefill.GapChoice`; else None).
 
     Armatures with ``knn`` or ``auto`` are filled in the space of their gaps
     (:func:`~..core.bonefill.fill_bones`, method ``auto``): only the gapped bones' rotations
@@ -236,15 +238,15 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
             take = plan.take
             if take.kind == "armature" and method in ("knn", "auto"):
                 # rotation gaps: Blender's interpolation unless the KB measurably beats it
-                results.append((None, fill_armature(take, plan.bone_gaps, plan.kb, knn, step,
-                                                    should_cancel, plan.messages.append)))
+                results.append((None, *fill_armature(take, plan.bone_gaps, plan.kb, knn, step,
+                                                     should_cancel, plan.messages.append)))
                 continue
             filled = fill(take.motion(plan.missing), method, kb=plan.kb, settings=knn,
                           progress=step, should_cancel=should_cancel).positions
             basis = None
             if take.kind == "armature":
                 basis, _ = bridge.solve_armature(take, filled, plan.write)
-            results.append((filled, basis))
+            results.append((filled, basis, None))
         progress(1.0, "writing keys")
         return results
 
@@ -252,14 +254,15 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
 
 
 def fill_armature(take, bone_gaps, kb, settings, progress, should_cancel, report):
-    """Basis matrices of an armature take after the rotation fill (world metres for the KB)."""
+    """Basis matrices of an armature take after the rotation fill (world metres for the KB),
+    and how each gap was filled."""
     from ..core.bonefill import fill_bones
 
     to_metres = np.diag([take.metres] * 3 + [1.0]) @ take.world
     return fill_bones(take.extra["rig"], take.extra["channels"], take.extra["location"],
                       bone_gaps, take.fps, kb=kb, method="auto", moves=take.extra["moves"],
                       to_metres=to_metres, settings=settings, progress=progress,
-                      should_cancel=should_cancel, report=report)
+                      should_cancel=should_cancel, report=report, return_choices=True)
 
 
 def apply_fill(context, plans, results):
@@ -267,7 +270,7 @@ def apply_fill(context, plans, results):
     import bpy
 
     written = 0
-    for plan, (filled, basis) in zip(plans, results):
+    for plan, (filled, basis, choices) in zip(plans, results):
         owner = bpy.data.objects[plan.owner]
         if plan.take.kind == "markers":
             ok = plan.write & np.isfinite(filled[..., 0])
@@ -286,5 +289,22 @@ def apply_fill(context, plans, results):
                 gap.filled = bool(np.isfinite(filled[rows, j, 0]).all())
             else:
                 gap.filled = True
+            if choices is not None:
+                gap.how, gap.estimate = how_filled(choices, gap.point, gap.first - plan.take.first,
+                                                   gap.last - plan.take.first)
         settings.showing = "RECOVERED"
     return written
+
+
+def how_filled(choices, bone, first, last):
+    """``(how, estimate)`` of a listed gap of ``bone`` over the take's rows ``first``-``last``
+    from the rotation fill's choices of the gaps it overlaps: the fill (``interp``: Blender's
+    interpolation kept; with the share of the way from it where the fill went part of the way)
+    and the copies' estimate of its error as a share of the interpolation's (the largest where
+    several, 0 where none judged it)."""
+    parts = [c for c in choices if c.bone == bone and c.first <= last and c.last >= first]
+    if not parts:
+        return "", 0.0
+    labels = [c.method if c.share in (0.0, 1.0) else f"{c.method} {c.share:.0%}" for c in parts]
+    judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
+    return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0)

@@ -6,13 +6,16 @@ from . import bridge, prefs
 
 
 class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
-    """Gaps of a take: point, frames, kind; filled gaps carry a check mark"""
+    """Gaps of a take: point, frames, kind; filled gaps carry a check mark (an armature's, the
+    fill each took)"""
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         icons = {"MISSING": "ERROR", "SUSPECT": "QUESTION", "MARKED": "BOOKMARKS"}
         row = layout.row(align=True)
         row.label(text=item.point, icon=icons[item.kind])
         row.label(text=f"{item.first}-{item.last} ({item.last - item.first + 1})")
+        if item.how:  # an armature's gap: the fill it took, and how it did on the gap's copies
+            row.label(text=item.how + (f" x{item.estimate:.2f}" if item.estimate else ""))
         row.label(text="", icon="CHECKMARK" if item.filled else "BLANK1")
 
     def filter_items(self, context, data, propname):

@@ -58,6 +58,11 @@ class MOCAP_GAPFILL_PG_gap(bpy.types.PropertyGroup):
     last: IntProperty(name="Last frame")
     kind: EnumProperty(name="Kind", items=GAP_KINDS, default="MISSING")
     filled: BoolProperty(name="Filled", description="Recovered keys were written for this gap")
+    how: StringProperty(name="Filled by", description="How an armature's gap was filled: the "
+                        "fill it took, or interp where Blender's interpolation was kept")
+    estimate: FloatProperty(name="Estimate", min=0.0, description=(
+        "The fill's error on copies of the gap (the same bone and length, where it is keyed) "
+        "as a share of Blender's interpolation's; 0 where no copies judged it"))
 
 
 class MOCAP_GAPFILL_PG_point(bpy.types.PropertyGroup):

@@ -52,6 +52,8 @@ body goes): ``knn`` and ``auto`` give their gaps ``hermite``'s curve (``knn``) o
 the interpolation (``auto`` decides per gap like any other).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -148,8 +150,28 @@ MATCH_OWN = True
 MATCH_DAMP = True
 
 
+@dataclass(frozen=True)
+class GapChoice:
+    """How one gap of a bone was filled (``fill_bones(..., return_choices=True)``).
+
+    ``bone``: its name; ``first``, ``last``: its frames (rows of the take, inclusive);
+    ``method``: the fill it took (``interp``: Blender's interpolation kept); ``share``: how far
+    from the interpolation towards that fill (1: all the way, 0: the interpolation);
+    ``estimate``: ``auto``'s judgement, the error of that fill (at the share the copies chose)
+    on copies of the gap - the same bone and length, placed where the bone is keyed - as a share
+    of the interpolation's there; NaN where no copies judged the gap."""
+
+    bone: str
+    first: int
+    last: int
+    method: str
+    share: float
+    estimate: float = float("nan")
+
+
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
-               to_metres=None, settings=None, progress=None, should_cancel=None, report=None):
+               to_metres=None, settings=None, progress=None, should_cancel=None, report=None,
+               return_choices=False):
     """Fill the rotation gaps of an armature take.
 
     Parameters
@@ -173,11 +195,16 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     to_metres : ndarray, shape (4, 4), optional
         Armature space -> world metres, Z up (default: identity).
     settings : KnnSettings, optional
+    return_choices : bool
+        Also return how each gap was filled.
 
     Returns
     -------
     ndarray, shape (frames, bones, 4, 4)
         Basis matrices: the input's everywhere except the gapped bones on their gap frames.
+    list of GapChoice
+        With ``return_choices``: per gap (run of gap frames of a bone, bone-major order) the
+        fill it took; ``auto`` decides per gap, every other method takes its own.
     """
     if method not in BONE_METHODS:
         raise GapFillError(f"unknown method {method!r}; choose from {', '.join(BONE_METHODS)}")
@@ -196,21 +223,29 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
                settings, progress or (lambda fraction, message: None), should_cancel,
                report or (lambda message: None))
     seen = basis_matrices(rig, channels, location)
+    runs = gap_runs(gaps)
+    job.choices = [(method, 0.0 if method == "interp" else 1.0)] * len(runs)
     if method == "interp" or not gaps.any():
-        return seen
-    if method == "slerp":
-        return _slerp(seen, gaps, moves)
-    if method == "hermite":
-        return job.hermite(channels, location, gaps, seen)
-    if method == "regress":
-        return job.regress(channels, location, gaps, seen)
-    if method == "positions":
-        return job.positions(seen, job.for_kb(gaps))
-    if method == "knn":
-        return job.knn(job.hermite(channels, location, gaps, seen), job.for_kb(gaps))
-    if method == "match":
-        return job.match(seen, job.for_kb(gaps))
-    return job.auto(channels, location, gaps, seen)
+        basis = seen
+    elif method == "slerp":
+        basis = _slerp(seen, gaps, moves)
+    elif method == "hermite":
+        basis = job.hermite(channels, location, gaps, seen)
+    elif method == "regress":
+        basis = job.regress(channels, location, gaps, seen)
+    elif method == "positions":
+        basis = job.positions(seen, job.for_kb(gaps))
+    elif method == "knn":
+        basis = job.knn(job.hermite(channels, location, gaps, seen), job.for_kb(gaps))
+    elif method == "match":
+        basis = job.match(seen, job.for_kb(gaps))
+    else:
+        basis = job.auto(channels, location, gaps, seen)
+    if not return_choices:
+        return basis
+    estimates = job.estimates or [float("nan")] * len(runs)
+    return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate))
+                   for (b, a, e), (name, share), estimate in zip(runs, job.choices, estimates)]
 
 
 class _Job:
@@ -226,6 +261,8 @@ class _Job:
         self._kb_features = None  # the knowledge base's rotations as match's features
         # a moving bone places its own head (heads rigs; a tails rig's root joint is its head)
         self.own = moves & (rig.roots if rig.lengths is not None else True)
+        # per gap, how it was filled, and auto's estimate of it from the copies
+        self.choices, self.estimates = [], None
 
     def moved_by(self, b):
         """(joints,) bool: the joints bone ``b`` moves (below it, and its own where it moves)."""
@@ -490,6 +527,7 @@ class _Job:
         runs = gap_runs(gaps)
         choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps else names[1],
                    1.0) for _, a, e in runs]
+        estimates = [float("nan")] * len(runs)
         longest = [rotations and (e - a + 1) >= LONG_STACK * self.fps
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
@@ -536,6 +574,8 @@ class _Job:
                              ("stack_long", 1.0) if longest[i] else ("interp", 0.0))
                 if longest[i] and own.sum() < AUTO_COPIES and e - a + 1 >= FEW_COPIES * self.fps:
                     choice[i] = ("stack_long", 1.0)  # too few copies of its own to judge by
+                if choice[i] in score:
+                    estimates[i] = float(np.exp(score[choice[i]]))
         wanted = np.zeros_like(gaps)
         for (b, a, e), (name, _) in zip(runs, choice):
             wanted[a:e + 1, b] = name != "interp"
@@ -550,6 +590,7 @@ class _Job:
                                                    lambda b, a: long_table)
             if rotations and not copies:
                 choice = self._outvoted(channels, location, wanted, seen, made, runs, choice)
+        self.choices, self.estimates = choice, estimates
         counts, partly = {}, {}
         for name, share in choice:
             counts[name] = counts.get(name, 0) + 1
