@@ -422,6 +422,9 @@ def test_batch_command_writes_a_new_filled_file(daz_armature, daz_kb, tmp_path):
                        text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "filled" in r.stdout and _sha(source) == before
+    # the log says per gap how it was filled
+    for bone, first, last in BONE_GAPS:
+        assert f": {bone} {first}-{last}: " in r.stdout, r.stdout
 
     for path in (out, out2):
         bpy.ops.wm.open_mainfile(filepath=str(path))
@@ -430,6 +433,7 @@ def test_batch_command_writes_a_new_filled_file(daz_armature, daz_kb, tmp_path):
         assert recovered is not None and arm.animation_data.action == recovered
         assert {g.point for g in arm.mocap_gapfill.gaps if g.filled} == {b for b, _, _ in
                                                                          BONE_GAPS}
+        assert all(g.how for g in arm.mocap_gapfill.gaps)  # saved with the file
         for curve in modules()[1].fcurves(arm):
             frames, _ = modules()[0].curve_keys(curve)
             types = np.empty(len(frames), dtype=np.int32)
