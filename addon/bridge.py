@@ -60,16 +60,50 @@ def set_keys(curves, data_path, index, frames, values, group, key_type="GENERATE
                             np.full(len(frames), compat.KEY_TYPES[key_type], dtype=np.int32)])
     # kept keys keep their interpolation; new ones are linear (what a mocap importer keys)
     modes = np.concatenate([old_modes[keep], np.full(len(frames), LINEAR, dtype=np.int32)])
-    order = np.argsort(frames_all, kind="stable")
+    _rewrite(curve, frames_all, values_all, types, modes)
+    return curve
+
+
+def _rewrite(curve, frames, values, types, modes):
+    """Replace an F-curve's keys (in frame order) in one go."""
+    order = np.argsort(frames, kind="stable")
     curve.keyframe_points.clear()
     curve.keyframe_points.add(len(order))
     co = np.empty(2 * len(order), dtype=np.float32)
-    co[0::2], co[1::2] = frames_all[order], values_all[order]
+    co[0::2], co[1::2] = frames[order], values[order]
     curve.keyframe_points.foreach_set("co", co)
     curve.keyframe_points.foreach_set("type", types[order])
     curve.keyframe_points.foreach_set("interpolation", modes[order])
     curve.update()
-    return curve
+
+
+def revert_keys(owner, point, first, last):
+    """Take the filled keys (typed GENERATED) of ``point`` (a bone of an armature, a marker of a
+    marker set) on frames ``first``-``last`` out of its recovered action: the keys either side
+    show there again as the original shows them; the recovered actions play afterwards.
+    Returns how many keys went."""
+    if is_marker_set(owner):
+        target, prefix = bpy.data.objects.get(point), "location"
+    else:
+        target, prefix = owner, f'pose.bones["{bpy.utils.escape_identifier(point)}"].'
+    if target is None or target.mocap_gapfill.recovered_action is None:
+        return 0
+    show(owner, "RECOVERED")
+    removed = 0
+    for curve in compat.fcurves(target) or ():
+        if not curve.data_path.startswith(prefix):
+            continue
+        frames, values = curve_keys(curve)
+        types = np.empty(len(frames), dtype=np.int32)
+        modes = np.empty(len(frames), dtype=np.int32)
+        curve.keyframe_points.foreach_get("type", types)
+        curve.keyframe_points.foreach_get("interpolation", modes)
+        drop = ((types == compat.KEY_TYPES["GENERATED"]) & (np.round(frames) >= first)
+                & (np.round(frames) <= last))
+        if drop.any():
+            _rewrite(curve, frames[~drop], values[~drop], types[~drop], modes[~drop])
+            removed += int(drop.sum())
+    return removed
 
 
 def _keyed_frames(curves, data_path, count):

@@ -254,6 +254,38 @@ class MOCAP_GAPFILL_OT_remove_gap(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class MOCAP_GAPFILL_OT_revert_gap(bpy.types.Operator):
+    """Take the recovered keys of the selected gap out again: the original keys either side
+    show there as before the fill (for an armature, Blender's interpolation of them)"""
+
+    bl_idname = "mocap_gapfill.revert_gap"
+    bl_label = "Revert Gap"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        owner = bridge.take_owner(context.active_object)
+        settings = owner.mocap_gapfill if owner is not None else None
+        if settings is None or not 0 <= settings.gap_index < len(settings.gaps):
+            cls.poll_message_set("Select a gap in the list")
+            return False
+        if not settings.gaps[settings.gap_index].filled:
+            cls.poll_message_set("The selected gap was not filled")
+            return False
+        return True
+
+    def execute(self, context):
+        owner = bridge.take_owner(context.active_object)
+        settings = owner.mocap_gapfill
+        gap = settings.gaps[settings.gap_index]
+        removed = bridge.revert_keys(owner, gap.point, gap.first, gap.last)
+        gap.filled, gap.how, gap.estimate = False, "", 0.0
+        settings.showing = "RECOVERED"
+        self.report({"INFO"}, f"{gap.point} {gap.first}-{gap.last}: {removed} recovered keys "
+                              "taken out; the original keys either side show there")
+        return {"FINISHED"}
+
+
 class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
     """Recover the gaps from the knowledge base (or by interpolation). Recovered keys go into a
     copy of the action; the original is kept for preview"""
@@ -439,7 +471,8 @@ class MOCAP_GAPFILL_OT_use_recent_kb(bpy.types.Operator):
 
 classes = (MOCAP_GAPFILL_OT_file_info, MOCAP_GAPFILL_OT_import_markers,
            MOCAP_GAPFILL_OT_open_sample, MOCAP_GAPFILL_OT_import_skeleton, MOCAP_GAPFILL_OT_detect_gaps,
-           MOCAP_GAPFILL_OT_mark_gap, MOCAP_GAPFILL_OT_remove_gap, MOCAP_GAPFILL_OT_fill_gaps,
+           MOCAP_GAPFILL_OT_mark_gap, MOCAP_GAPFILL_OT_remove_gap, MOCAP_GAPFILL_OT_revert_gap,
+           MOCAP_GAPFILL_OT_fill_gaps,
            MOCAP_GAPFILL_OT_ghost, MOCAP_GAPFILL_OT_load_kb, MOCAP_GAPFILL_OT_build_kb,
            MOCAP_GAPFILL_OT_use_recent_kb)
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -111,7 +111,9 @@ class MOCAP_GAPFILL_PT_gaps(_Panel, bpy.types.Panel):
         row = layout.row()
         row.template_list("MOCAP_GAPFILL_UL_gaps", "", settings, "gaps", settings, "gap_index",
                           rows=6)
-        row.operator("mocap_gapfill.remove_gap", text="", icon="X")
+        column = row.column(align=True)
+        column.operator("mocap_gapfill.remove_gap", text="", icon="X")
+        column.operator("mocap_gapfill.revert_gap", text="", icon="LOOP_BACK")
         layout.prop(context.scene.mocap_gapfill, "detect_suspects")
         if len(settings.points):
             layout.label(text=f"Points with gaps ({settings.frames} frames):")

@@ -118,6 +118,18 @@ def test_c3d_markers_detect_fill_preview(scene, data_dir, marker_kb):
     original = bridge.read_take(root, scene)
     assert np.array_equal(np.isnan(original.positions[..., 0]), mask)
 
+    # Revert Gap: the elbow's gap open again in the recovered action, the other gaps filled
+    root.mocap_gapfill.gap_index = next(i for i, g in enumerate(root.mocap_gapfill.gaps)
+                                        if g.point == "LELB")
+    assert bpy.ops.mocap_gapfill.revert_gap() == {"FINISHED"}
+    assert root.mocap_gapfill.showing == "RECOVERED"
+    assert [g.point for g in root.mocap_gapfill.gaps if not g.filled] == ["LELB"]
+    elbow_gap = np.zeros_like(mask)
+    elbow_gap[99:189, take.points.index("LELB")] = True
+    reverted = bridge.read_take(root, scene)
+    assert np.array_equal(np.isnan(reverted.positions[..., 0]), elbow_gap)
+    assert np.array_equal(reverted.positions[~elbow_gap], take.positions[~elbow_gap])
+
 
 def test_a_second_take_of_the_same_markers_fills_with_the_starter_kb(scene, data_dir):
     """Imported beside another take, the markers' objects become LFHD.001...; the core still
@@ -301,6 +313,26 @@ def test_bvh_armature_fill_beats_blender_interpolation(daz_armature, daz_kb, dat
         steps = _rotation_steps(after.extra["basis"][:, j])
         inside = steps[first - 2:last + 1]
         assert inside.max() < 4 * _rotation_steps(truth.extra["basis"][:, j]).max() + 0.02, bone
+
+    # Revert Gap: a filled gap back to Blender's interpolation, the other gaps as filled
+    items = list(arm.mocap_gapfill.gaps)
+    i = next(k for k, g in enumerate(items) if g.how != "interp")
+    reverted = items[i]
+    arm.mocap_gapfill.gap_index = i
+    assert bpy.ops.mocap_gapfill.revert_gap() == {"FINISHED"}
+    assert not reverted.filled and not reverted.how
+    assert bpy.ops.mocap_gapfill.revert_gap.poll() is False  # nothing left to revert there
+    back = bridge.read_take(arm, scene)
+    assert arm.animation_data.action == arm.mocap_gapfill.recovered_action
+    undone = np.zeros(back.positions.shape[:2], bool)  # the joints the reverted bone moves
+    undone[reverted.first - broken.first:reverted.last - broken.first + 1,
+           below[rig.names.index(reverted.point)]] = True
+    assert np.abs(back.positions[undone] - broken.positions[undone]).max() * m < 1e-6
+    assert np.abs(back.positions[~undone] - after.positions[~undone]).max() * m < 1e-6
+    prefix = f'pose.bones["{reverted.point}"]'
+    assert {(c.data_path, c.array_index): len(c.keyframe_points) for c in compat.fcurves(arm)
+            if c.data_path.startswith(prefix)} == {
+        key: n for key, n in keys_before.items() if key[0].startswith(prefix)}
 
 
 def _rotation_steps(basis):
