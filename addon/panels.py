@@ -6,17 +6,17 @@ from . import bridge, prefs
 
 
 class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
-    """Gaps of a take: point, frames, kind; filled gaps carry a check mark (an armature's, the
-    fill each took)"""
+    """Gaps of a take: point, frames, kind; filled gaps carry a check mark (an armature's gap
+    where the interpolation was kept, a curve)"""
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         icons = {"MISSING": "ERROR", "SUSPECT": "QUESTION", "MARKED": "BOOKMARKS"}
         row = layout.row(align=True)
         row.label(text=item.point, icon=icons[item.kind])
         row.label(text=f"{item.first}-{item.last} ({item.last - item.first + 1})")
-        if item.how:  # an armature's gap: the fill it took, and how it did on the gap's copies
-            row.label(text=item.how + (f" x{item.estimate:.2f}" if item.estimate else ""))
-        row.label(text="", icon="CHECKMARK" if item.filled else "BLANK1")
+        # filled (an armature's gap where Blender's interpolation was kept: its curve icon)
+        row.label(text="", icon="IPO_LINEAR" if item.how == "interp" else
+                  "CHECKMARK" if item.filled else "BLANK1")
 
     def filter_items(self, context, data, propname):
         items = getattr(data, propname)
@@ -114,12 +114,26 @@ class MOCAP_GAPFILL_PT_gaps(_Panel, bpy.types.Panel):
         column = row.column(align=True)
         column.operator("mocap_gapfill.remove_gap", text="", icon="X")
         column.operator("mocap_gapfill.revert_gap", text="", icon="LOOP_BACK")
+        if 0 <= settings.gap_index < len(settings.gaps) and settings.gaps[settings.gap_index].how:
+            _how_filled(layout.box().column(align=True), settings.gaps[settings.gap_index])
         layout.prop(context.scene.mocap_gapfill, "detect_suspects")
         if len(settings.points):
             layout.label(text=f"Points with gaps ({settings.frames} frames):")
             layout.template_list("MOCAP_GAPFILL_UL_points", "", settings, "points", settings,
                                  "point_index", rows=3)
         layout.prop(settings, "units")
+
+
+def _how_filled(column, gap):
+    """How the selected gap of an armature was filled, in words."""
+    column.label(text=f"{gap.point} {gap.first}-{gap.last}:", icon="INFO")
+    if gap.how == "interp":
+        column.label(text="Blender's interpolation kept")
+        column.label(text="(no fill beat it on copies of the gap)")
+        return
+    column.label(text=f"filled by {gap.how}")
+    if gap.estimate:
+        column.label(text=f"copies: {gap.estimate:.2f} of the interpolation's error")
 
 
 class MOCAP_GAPFILL_PT_fill(_Panel, bpy.types.Panel):

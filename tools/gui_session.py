@@ -241,10 +241,20 @@ def sample_step(state, window, area, wm):
         say("sample armature filled:", sum(g.filled for g in arm.mocap_gapfill.gaps), "of",
             len(arm.mocap_gapfill.gaps), "gaps; showing", arm.mocap_gapfill.showing,
             "action:", arm.animation_data.action.name)
+        say("how each gap was filled:", [(g.point, g.how, round(g.estimate, 2))
+                                          for g in arm.mocap_gapfill.gaps])
+        # the panel says in words how the selected gap was filled
+        arm.mocap_gapfill.gap_index = next(
+            (i for i, g in enumerate(arm.mocap_gapfill.gaps) if g.how not in ("", "interp")), 0)
         frame_object(arm, area, 170)
         state["step"] = 9
         return 1.0
     shot("6_sample_armature_filled")
+    with bpy.context.temp_override(window=window, area=area):
+        result = bpy.ops.mocap_gapfill.revert_gap()
+    gap = arm.mocap_gapfill.gaps[arm.mocap_gapfill.gap_index]
+    say("revert gap:", result, gap.point, "filled:", gap.filled, "still filled:",
+        sum(g.filled for g in arm.mocap_gapfill.gaps))
     bpy.ops.wm.quit_blender()
     return None
 
