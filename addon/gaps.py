@@ -289,9 +289,9 @@ def apply_fill(context, plans, results):
                 gap.filled = bool(np.isfinite(filled[rows, j, 0]).all())
             else:
                 gap.filled = True
-            if choices is not None:
-                gap.how, gap.estimate = how_filled(choices, gap.point, gap.first - plan.take.first,
-                                                   gap.last - plan.take.first)
+            # how an armature's gap was filled in rotation space (nothing to say otherwise)
+            gap.how, gap.estimate = ("", 0.0) if choices is None else how_filled(
+                choices, gap.point, gap.first - plan.take.first, gap.last - plan.take.first)
         settings.showing = "RECOVERED"
     return written
 

@@ -129,7 +129,7 @@ def _how_filled(column, gap):
     column.label(text=f"{gap.point} {gap.first}-{gap.last}:", icon="INFO")
     if gap.how == "interp":
         column.label(text="Blender's interpolation kept")
-        column.label(text="(no fill beat it on copies of the gap)")
+        column.label(text="(no fill was judged better there)")
         return
     column.label(text=f"filled by {gap.how}")
     if gap.estimate:
