@@ -35,8 +35,35 @@ def choose_blas_kernel(environ=os.environ, cpuinfo="/proc/cpuinfo"):
     return None
 
 
+#: BLAS / OpenMP threads of a command that fills, where nothing says otherwise; ``batch`` gives
+#: each worker its share of the cores, ``bench`` measures the backends as they come
+BLAS_THREADS = 4
+THREADS_OF_THEIR_OWN = ("batch", "bench")
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def cap_blas_threads(argv, environ=os.environ, cores=None):
+    """At most :data:`BLAS_THREADS` BLAS / OpenMP threads (:data:`THREAD_VARIABLES`) before numpy
+    loads; returns the number set, or None where nothing was changed.
+
+    A fill runs BLAS on two threads at once (the knowledge base's models beside the copies'
+    other estimates), each with a BLAS thread per core by default: on a 16-core machine the
+    point ``auto`` of 2,048 frames took 5.6-6.6 s so, 3.8-4.3 s with 4 (numpy; 5.2-5.6
+    and 3.6-3.8 s with torch on the GPU; docs/BENCHMARKS.md, session 33). Nothing is changed
+    when one of the variables is set, numpy is already loaded, or the command divides or
+    measures the cores itself (:data:`THREADS_OF_THEIR_OWN`).
+    """
+    if (any(name in environ for name in THREAD_VARIABLES) or "numpy" in sys.modules
+            or (argv and argv[0] in THREADS_OF_THEIR_OWN)):
+        return None
+    threads = min(cores or os.cpu_count() or 1, BLAS_THREADS)
+    environ.update({name: str(threads) for name in THREAD_VARIABLES})
+    return threads
+
+
 def main(argv=None):
     choose_blas_kernel()
+    cap_blas_threads(sys.argv[1:] if argv is None else list(argv))
     from .addon.commands import add_commands
     from .addon.bpy_exit import leave_if_bpy_would_crash
     from .core.cli import main as core_main

@@ -310,3 +310,28 @@ def test_blas_kernel_follows_the_cpu_features(tmp_path):
     assert json.loads(result.stdout) == {
         "avx512": "SkylakeX", "avx512f only": "Haswell", "old": None, "missing file": None,
         "already set": [None, "Zen"], "numpy loaded": None}
+
+
+def test_blas_threads_capped_for_the_fills():
+    """The command line lets a fill use at most four BLAS threads (two BLAS users at once in
+    `auto` made 16 threads each 1.5x slower than 4), and leaves the threads alone where a
+    variable is set, numpy is loaded, or the command is `batch` or `bench`."""
+    code = (
+        "import json\n"
+        "from mocap_gapfill.__main__ import cap_blas_threads\n"
+        "out = {}\n"
+        "for name, argv, env, cores in [('16 cores', ['fill'], {}, 16), ('2 cores', ['blend'], {}, 2),\n"
+        "        ('set', ['fill'], {'OPENBLAS_NUM_THREADS': '8'}, 16), ('batch', ['batch'], {}, 16),\n"
+        "        ('bench', ['bench'], {}, 16), ('no command', [], {}, 16)]:\n"
+        "    out[name] = [cap_blas_threads(argv, env, cores), env]\n"
+        "import numpy\n"
+        "out['numpy loaded'] = cap_blas_threads(['fill'], {}, 16)\n"
+        "print(json.dumps(out))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    four = {"OMP_NUM_THREADS": "4", "OPENBLAS_NUM_THREADS": "4", "MKL_NUM_THREADS": "4"}
+    assert json.loads(result.stdout) == {
+        "16 cores": [4, four], "2 cores": [2, {k: "2" for k in four}],
+        "set": [None, {"OPENBLAS_NUM_THREADS": "8"}], "batch": [None, {}], "bench": [None, {}],
+        "no command": [4, four], "numpy loaded": None}
