@@ -61,8 +61,8 @@ class MOCAP_GAPFILL_PG_gap(bpy.types.PropertyGroup):
     how: StringProperty(name="Filled by", description="How an armature's gap was filled: the "
                         "fill it took, or interp where Blender's interpolation was kept")
     estimate: FloatProperty(name="Estimate", min=0.0, description=(
-        "The fill's error on copies of the gap (the same bone and length, where it is keyed) "
-        "as a share of Blender's interpolation's; 0 where no copies judged it"))
+        "The fill's RMS error on copies of the gap (the same bone and length, where it is "
+        "keyed) as a share of Blender's interpolation's; 0 where no copies judged it"))
 
 
 class MOCAP_GAPFILL_PG_point(bpy.types.PropertyGroup):

@@ -157,9 +157,11 @@ class GapChoice:
     ``bone``: its name; ``first``, ``last``: its frames (rows of the take, inclusive);
     ``method``: the fill it took (``interp``: Blender's interpolation kept); ``share``: how far
     from the interpolation towards that fill (1: all the way, 0: the interpolation);
-    ``estimate``: ``auto``'s judgement, the error of that fill (at the share the copies chose)
-    on copies of the gap - the same bone and length, placed where the bone is keyed - as a share
-    of the interpolation's there; NaN where no copies judged the gap."""
+    ``estimate``: ``auto``'s judgement, the RMS joint error of that fill (at the share the
+    copies chose) on copies of the gap - the same bone and length, placed where the bone is
+    keyed - as a share of the interpolation's there (their geometric mean, drawn towards the
+    take's mean over all copies as ``auto`` scores them); NaN where no copies judged the
+    gap."""
 
     bone: str
     first: int
@@ -574,8 +576,8 @@ class _Job:
                              ("stack_long", 1.0) if longest[i] else ("interp", 0.0))
                 if longest[i] and own.sum() < AUTO_COPIES and e - a + 1 >= FEW_COPIES * self.fps:
                     choice[i] = ("stack_long", 1.0)  # too few copies of its own to judge by
-                if choice[i] in score:
-                    estimates[i] = float(np.exp(score[choice[i]]))
+                if choice[i] in score:  # as a ratio of RMS errors, not of squared ones
+                    estimates[i] = float(np.exp(score[choice[i]] / 2))
         wanted = np.zeros_like(gaps)
         for (b, a, e), (name, _) in zip(runs, choice):
             wanted[a:e + 1, b] = name != "interp"

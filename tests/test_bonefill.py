@@ -171,8 +171,9 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, daz
             span = auto[c.first:c.last + 1, rig.names.index(c.bone)]
             kept = np.array_equal(span, interp[c.first:c.last + 1, rig.names.index(c.bone)])
             assert kept == (c.method == "interp" or c.share == 0), c
-            bar = bonefill.PROMOTE if length >= bonefill.LONG_GAP * fps else (
-                bonefill.PROMOTE_SHORT_WHOLE if c.share == 1 else bonefill.PROMOTE_SHORT)
+            # the thresholds are on squared errors, the estimate on RMS ones
+            bar = np.sqrt(bonefill.PROMOTE if length >= bonefill.LONG_GAP * fps else (
+                bonefill.PROMOTE_SHORT_WHOLE if c.share == 1 else bonefill.PROMOTE_SHORT))
             # the copies' verdict where they gave one (a take too short for copies of its long
             # gaps takes match unjudged)
             assert np.isnan(c.estimate) or (c.method != "interp" and 0 < c.estimate < bar), c
