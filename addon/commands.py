@@ -135,9 +135,10 @@ def real_scenes(outdir, report=print):
                        "markers cannot place)")
                 continue
             scores = samples.bone_gap_scores(truth, before, after)
+            how = {g.point: g.how for g in owner.mocap_gapfill.gaps}
             report("  joints below each gapped bone, RMSE on Blender's evaluation: " + ", ".join(
-                f"{bone} {fill:.1f} mm (Blender's interpolation {interp:.1f})"
-                for bone, (fill, interp) in scores.items()))
+                f"{bone} {fill:.1f} mm by {how.get(bone) or 'the fill'} (Blender's "
+                f"interpolation {interp:.1f})" for bone, (fill, interp) in scores.items()))
         return scores
     finally:
         unregister_addon()
