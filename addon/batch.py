@@ -68,7 +68,7 @@ def run(args, report=print):
             for gap in bpy.data.objects[plan.owner].mocap_gapfill.gaps:
                 if gap.how:  # an armature's gap: how it was filled
                     report(f"{plan.owner}: {gap.point} {gap.first}-{gap.last}: {gap.how}"
-                           + (f" (copies: x{gap.estimate:.2f} of the interpolation's error)"
+                           + (f"; copies: {gap.estimate:.2f} of the interpolation's error"
                               if gap.estimate else ""))
         report(f"filled {written} samples")
     bpy.ops.wm.save_as_mainfile(filepath=str(out), copy=True)

@@ -305,6 +305,7 @@ def how_filled(choices, bone, first, last):
     parts = [c for c in choices if c.bone == bone and c.first <= last and c.last >= first]
     if not parts:
         return "", 0.0
-    labels = [c.method if c.share in (0.0, 1.0) else f"{c.method} {c.share:.0%}" for c in parts]
+    labels = [c.method if c.share in (0.0, 1.0) else f"{c.method} ({c.share:.0%} of the way)"
+              for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0)
