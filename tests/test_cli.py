@@ -274,9 +274,15 @@ def test_demo_is_the_main_job(tmp_path):
         for suffix in ("", "_filled"):
             assert (tmp_path / f"{stem}{suffix}.blend").is_file(), stem + suffix
     assert "2773 marker samples missing, 30 filled" in r.stdout
-    real_bones = {bone: (float(fill), float(interp)) for bone, fill, interp in re.findall(
-        r"(\w+) ([\d.]+) mm \(Blender's interpolation ([\d.]+)\)", r.stdout)}
+    found = re.findall(r"(\w+) ([\d.]+) mm by (.+?) \(Blender's interpolation ([\d.]+)\)",
+                       r.stdout)
+    real_bones = {bone: (float(fill), float(interp)) for bone, fill, _, interp in found}
     assert set(real_bones) == {"lForeArm", "rShin", "chest"}, r.stdout
+    # and how each was filled: where the interpolation was kept, nothing changed
+    how = {bone: by for bone, _, by, _ in found}
+    assert all(by == "interp" or by.split()[0] in ("match", "mix", "stack", "stack_long")
+               for by in how.values()), how
+    assert all(real_bones[b][0] == real_bones[b][1] for b, by in how.items() if by == "interp")
     # measured 103.7 / 87.5 / 7.2 vs 128.2 / 86.0 / 7.2 mm (rShin 2 % worse)
     assert all(fill <= 1.1 * interp + 2.0 for fill, interp in real_bones.values())
     frames = {"lForeArm": 100, "rShin": 90, "chest": 60}
