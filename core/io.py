@@ -28,7 +28,7 @@ def file_suffix(path):
     return ".bvh.gz" if name.endswith(".bvh.gz") else Path(name).suffix
 
 
-def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=None):
+def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=None, bvh=None):
     """Read a motion file into a :class:`~mocap_gapfill.core.motion.Motion`.
 
     Parameters
@@ -46,6 +46,9 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=N
     up : str, optional
         ``"y"`` or ``"z"``: the up axis of the file's data, whatever its header says (see
         :mod:`.upright`); default: the header's.
+    bvh : BvhFile, optional
+        BVH only: the file as :func:`~.formats.bvh.parse_bvh` gave it, for a caller that also
+        reads its armature (:func:`read_rig_basis`) and parses it once.
 
     Raises
     ------
@@ -67,7 +70,8 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=N
     if suffix in (".bvh", ".bvh.gz"):
         from .formats.bvh import read_bvh
 
-        motion = read_bvh(path, units=units, skip_frames=skip_frames, end_sites=end_sites)
+        motion = read_bvh(path, units=units, skip_frames=skip_frames, end_sites=end_sites,
+                          bvh=bvh)
     elif suffix == ".amc":
         from .formats.asfamc import read_asf_amc
 
@@ -119,14 +123,15 @@ def read_rig_take(path, skip_frames=0, asf=None):
     return (*rig_from_motion(motion), motion.fps)
 
 
-def read_rig_basis(path, skip_frames=0, asf=None):
+def read_rig_basis(path, skip_frames=0, asf=None, bvh=None):
     """:func:`read_rig_take`'s armature with its pose as basis matrices (frames, bones, 4, 4):
-    ``(rig, basis, fps)``; a BVH's straight from its rotations, without Blender's channels."""
+    ``(rig, basis, fps)``; a BVH's straight from its rotations, without Blender's channels
+    (``bvh``: the file already parsed, as :func:`read_motion` takes it)."""
     from .formats.bvh import read_bvh_basis
     from .rig import basis_matrices
 
     if file_suffix(path) in (".bvh", ".bvh.gz"):
-        return read_bvh_basis(path, skip_frames=skip_frames)
+        return read_bvh_basis(path, skip_frames=skip_frames, bvh=bvh)
     rig, channels, location, fps = read_rig_take(path, skip_frames, asf)
     return rig, basis_matrices(rig, channels, location), fps
 

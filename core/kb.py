@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import GapFillError, ParseError
+from .formats.bvh import parse_bvh
 from .formats.tabular import load_arrays, scalar, strings
 from .io import (READ_FORMATS, RIG_FORMATS, atomic_output, file_suffix, read_motion,
                  read_rig_basis)
@@ -230,13 +231,15 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
             raise KeyboardInterrupt
         if progress:
             progress(i / len(files), f"reading {path.name}")
-        motion = read_motion(path, skip_frames=skip_frames, **(read_options or {}))
+        # an armature take's file is parsed once for its joints and its bones' rotations
+        bvh = parse_bvh(path) if rigs and file_suffix(path) in (".bvh", ".bvh.gz") else None
+        motion = read_motion(path, skip_frames=skip_frames, bvh=bvh, **(read_options or {}))
         warning = upright_warning(motion)
         if warning and report:
             report(f"{path.name}: {warning}")
         motions.append(motion)
         if rigs:
-            turns.append(take_turns(path, skip_frames, motion.n_frames, asf))
+            turns.append(take_turns(path, skip_frames, motion.n_frames, asf, bvh))
             rigs = turns[-1] is not None
     kb = kb_from_motions(motions, fps, stride, report, turns if rigs else None)
     if progress:
@@ -244,10 +247,10 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
     return kb
 
 
-def take_turns(path, skip_frames, n_frames, asf=None):
-    """:func:`rig_turns` of an armature take file; None where the armature's frames are not
-    the motion's."""
-    rig, basis, _ = read_rig_basis(path, skip_frames, asf)
+def take_turns(path, skip_frames, n_frames, asf=None, bvh=None):
+    """:func:`rig_turns` of an armature take file (``bvh``: a BVH's, already parsed); None
+    where the armature's frames are not the motion's."""
+    rig, basis, _ = read_rig_basis(path, skip_frames, asf, bvh)
     if len(basis) != n_frames:
         return None
     return rig_turns(rig, basis)

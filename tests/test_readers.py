@@ -155,3 +155,20 @@ def test_marker_limbs_are_rigid_pairs(data_dir):
                        - motion.positions[:, motion.limbs[:, 1]], axis=2)
     assert d.std(axis=0).max() <= 0.006
     assert re.match(r"^\w", motion.names[0])
+
+
+def test_a_bvh_parsed_once_reads_as_twice(data_dir):
+    """The knowledge-base build parses an armature take once for its joints and its bones'
+    rotations: the same motion and basis as two reads, the parsed file left whole."""
+    from mocap_gapfill.core.formats.bvh import parse_bvh, read_bvh_basis
+
+    path = data_dir / "cmu/bvh/daz_friendly/07/07_05.bvh.gz"
+    parsed = parse_bvh(path)
+    frames = len(parsed.values)
+    once = read_motion(path, skip_frames=6, bvh=parsed), read_bvh_basis(path, skip_frames=6,
+                                                                        bvh=parsed)
+    assert len(parsed.values) == frames
+    twice = read_motion(path, skip_frames=6), read_bvh_basis(path, skip_frames=6)
+    assert np.array_equal(once[0].positions, twice[0].positions)
+    assert once[0].names == twice[0].names and len(once[0].positions) == frames - 6
+    assert np.array_equal(once[1][1], twice[1][1]) and once[1][0].names == twice[1][0].names

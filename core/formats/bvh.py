@@ -5,7 +5,7 @@ optionally, every End Site). BVH has no unit field: the unit is guessed from the
 rest skeleton (see :func:`guess_units`) unless given.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -227,7 +227,7 @@ def guess_units(bvh):
     return units_for_height(float(np.ptp(rest[:, 1])) or float(np.ptp(rest)))
 
 
-def read_bvh(path, units=None, skip_frames=0, end_sites=False):
+def read_bvh(path, units=None, skip_frames=0, end_sites=False, bvh=None):
     """Read a BVH (or ``.bvh.gz``) file into a :class:`Motion`.
 
     Parameters
@@ -238,15 +238,18 @@ def read_bvh(path, units=None, skip_frames=0, end_sites=False):
         Leading frames to drop (converters often put a reference pose in frame 0).
     end_sites : bool
         Also return End Site positions (named ``<joint>_End``).
+    bvh : BvhFile, optional
+        The file as :func:`parse_bvh` gave it, for a caller that converts it twice (the
+        knowledge-base build: the joints here, the armature in :func:`read_bvh_basis`).
     """
-    bvh = parse_bvh(path)
+    bvh = bvh or parse_bvh(path)
     if units is None:
         units = guess_units(bvh)
     elif units not in UNIT_SCALES:
         raise ParseError(f"unknown units {units!r} (use one of {', '.join(UNIT_SCALES)})", path)
     if not 0 <= skip_frames <= bvh.values.shape[0]:
         raise ParseError(f"cannot skip {skip_frames} of {bvh.values.shape[0]} frames", path)
-    bvh.values = bvh.values[skip_frames:]
+    bvh = replace(bvh, values=bvh.values[skip_frames:])  # the caller's stays whole
     keep = [j for j, joint in enumerate(bvh.joints) if end_sites or not joint.end_site]
     positions = forward_kinematics(bvh)[:, keep] * UNIT_SCALES[units]
     remap = {old: new for new, old in enumerate(keep)}
@@ -279,12 +282,13 @@ def read_bvh_rig(path, units=None, skip_frames=0):
     return rig, channels, np.ascontiguousarray(basis[..., :3, 3]), fps
 
 
-def read_bvh_basis(path, units=None, skip_frames=0):
+def read_bvh_basis(path, units=None, skip_frames=0, bvh=None):
     """:func:`read_bvh_rig`'s armature with its pose as basis matrices (frames, bones, 4, 4)
-    rather than channels: ``(rig, basis, fps)``, what a knowledge base keeps of the take."""
+    rather than channels: ``(rig, basis, fps)``, what a knowledge base keeps of the take
+    (``bvh``: the file already parsed, as :func:`read_bvh` takes it)."""
     from ..rig import Rig, bone_matrix
 
-    bvh = parse_bvh(path)
+    bvh = bvh or parse_bvh(path)
     units = units or guess_units(bvh)
     if units not in UNIT_SCALES:
         raise ParseError(f"unknown units {units!r} (use one of {', '.join(UNIT_SCALES)})", path)
