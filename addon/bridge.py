@@ -47,13 +47,8 @@ def set_keys(curves, data_path, index, frames, values, group, key_type="GENERATE
     ``key_type`` so filled keys stand out in the Dope Sheet and Graph Editor."""
     curve = curves.find(data_path, index=index) or compat.new_fcurve(curves, data_path, index,
                                                                        group)
-    old_frames, old_values = curve_keys(curve)
+    old_frames, old_values, old_types, old_modes = _keys(curve)
     keep = ~np.isin(np.round(old_frames), np.round(frames))
-    old_types = np.empty(len(old_frames), dtype=np.int32)
-    old_modes = np.empty(len(old_frames), dtype=np.int32)
-    if len(old_frames):
-        curve.keyframe_points.foreach_get("type", old_types)
-        curve.keyframe_points.foreach_get("interpolation", old_modes)
     frames_all = np.concatenate([old_frames[keep], frames])
     values_all = np.concatenate([old_values[keep], values])
     types = np.concatenate([old_types[keep],
@@ -62,6 +57,18 @@ def set_keys(curves, data_path, index, frames, values, group, key_type="GENERATE
     modes = np.concatenate([old_modes[keep], np.full(len(frames), LINEAR, dtype=np.int32)])
     _rewrite(curve, frames_all, values_all, types, modes)
     return curve
+
+
+def _keys(curve):
+    """``(frames, values, types, interpolations)`` of an F-curve's keys; the last two as the
+    integers ``foreach_get`` gives."""
+    frames, values = curve_keys(curve)
+    types = np.empty(len(frames), dtype=np.int32)
+    modes = np.empty(len(frames), dtype=np.int32)
+    if len(frames):
+        curve.keyframe_points.foreach_get("type", types)
+        curve.keyframe_points.foreach_get("interpolation", modes)
+    return frames, values, types, modes
 
 
 def _rewrite(curve, frames, values, types, modes):
@@ -93,11 +100,7 @@ def revert_keys(owner, point, first, last):
     for curve in compat.fcurves(target) or ():
         if not curve.data_path.startswith(prefix):
             continue
-        frames, values = curve_keys(curve)
-        types = np.empty(len(frames), dtype=np.int32)
-        modes = np.empty(len(frames), dtype=np.int32)
-        curve.keyframe_points.foreach_get("type", types)
-        curve.keyframe_points.foreach_get("interpolation", modes)
+        frames, values, types, modes = _keys(curve)
         drop = ((types == compat.KEY_TYPES["GENERATED"]) & (np.round(frames) >= first)
                 & (np.round(frames) <= last))
         if drop.any():

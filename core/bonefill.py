@@ -225,8 +225,6 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
                settings, progress or (lambda fraction, message: None), should_cancel,
                report or (lambda message: None))
     seen = basis_matrices(rig, channels, location)
-    runs = gap_runs(gaps)
-    job.choices = [(method, 0.0 if method == "interp" else 1.0)] * len(runs)
     if method == "interp" or not gaps.any():
         basis = seen
     elif method == "slerp":
@@ -245,9 +243,11 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
         basis = job.auto(channels, location, gaps, seen)
     if not return_choices:
         return basis
+    runs = gap_runs(gaps)  # auto's choices are per gap; every other method takes its own
+    choices = job.choices or [(method, 0.0 if method == "interp" else 1.0)] * len(runs)
     estimates = job.estimates or [float("nan")] * len(runs)
     return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate))
-                   for (b, a, e), (name, share), estimate in zip(runs, job.choices, estimates)]
+                   for (b, a, e), (name, share), estimate in zip(runs, choices, estimates)]
 
 
 class _Job:
@@ -263,8 +263,8 @@ class _Job:
         self._kb_features = None  # the knowledge base's rotations as match's features
         # a moving bone places its own head (heads rigs; a tails rig's root joint is its head)
         self.own = moves & (rig.roots if rig.lengths is not None else True)
-        # per gap, how it was filled, and auto's estimate of it from the copies
-        self.choices, self.estimates = [], None
+        # auto's choice per gap and its estimate of it from the copies (None: not auto)
+        self.choices = self.estimates = None
 
     def moved_by(self, b):
         """(joints,) bool: the joints bone ``b`` moves (below it, and its own where it moves)."""

@@ -20,6 +20,9 @@ from pathlib import Path
 from .errors import GapFillError, ParseError
 
 READ_FORMATS = (".c3d", ".bvh", ".bvh.gz", ".amc", ".npz", ".csv")
+#: the BVH files (plain and gzipped), and the armature takes
+BVH_FORMATS = (".bvh", ".bvh.gz")
+RIG_FORMATS = BVH_FORMATS + (".amc",)
 WRITE_FORMATS = (".c3d", ".npz", ".csv")
 
 
@@ -67,7 +70,7 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=N
     if not path.is_file():
         raise ParseError("no such file" if not path.exists() else "not a file", path)
     suffix = file_suffix(path)
-    if suffix in (".bvh", ".bvh.gz"):
+    if suffix in BVH_FORMATS:
         from .formats.bvh import read_bvh
 
         motion = read_bvh(path, units=units, skip_frames=skip_frames, end_sites=end_sites,
@@ -93,7 +96,7 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=N
     else:
         raise ParseError(f"unknown file type {suffix or '(none)'}; readable: "
                          f"{', '.join(READ_FORMATS)}", path)
-    if skip_frames and suffix not in (".bvh", ".bvh.gz"):
+    if skip_frames and suffix not in BVH_FORMATS:
         if skip_frames > motion.n_frames:
             raise ParseError(f"cannot skip {skip_frames} of {motion.n_frames} frames", path)
         motion = motion.frame_range(skip_frames)
@@ -102,9 +105,6 @@ def read_motion(path, asf=None, units=None, skip_frames=0, end_sites=False, up=N
 
         motion = turn_up(motion, up)
     return motion
-
-
-RIG_FORMATS = (".bvh", ".bvh.gz", ".amc")
 
 
 def read_rig_take(path, skip_frames=0, asf=None):
@@ -117,7 +117,7 @@ def read_rig_take(path, skip_frames=0, asf=None):
     if suffix not in RIG_FORMATS:
         raise ParseError(f"a {suffix or 'file'} holds no armature; armature takes: "
                          f"{', '.join(RIG_FORMATS)}", path)
-    if suffix in (".bvh", ".bvh.gz"):
+    if suffix in BVH_FORMATS:
         return read_bvh_rig(path, skip_frames=skip_frames)
     motion = read_motion(path, asf=asf, skip_frames=skip_frames)
     return (*rig_from_motion(motion), motion.fps)
@@ -130,7 +130,7 @@ def read_rig_basis(path, skip_frames=0, asf=None, bvh=None):
     from .formats.bvh import read_bvh_basis
     from .rig import basis_matrices
 
-    if file_suffix(path) in (".bvh", ".bvh.gz"):
+    if file_suffix(path) in BVH_FORMATS:
         return read_bvh_basis(path, skip_frames=skip_frames, bvh=bvh)
     rig, channels, location, fps = read_rig_take(path, skip_frames, asf)
     return rig, basis_matrices(rig, channels, location), fps

@@ -18,8 +18,8 @@ import numpy as np
 from .errors import GapFillError, ParseError
 from .formats.bvh import parse_bvh
 from .formats.tabular import load_arrays, scalar, strings
-from .io import (READ_FORMATS, RIG_FORMATS, atomic_output, file_suffix, read_motion,
-                 read_rig_basis)
+from .io import (BVH_FORMATS, READ_FORMATS, RIG_FORMATS, atomic_output, file_suffix,
+                 read_motion, read_rig_basis)
 from .normalize import find_reference, frames_of, normalize
 from .upright import upright_warning
 
@@ -232,7 +232,7 @@ def build_kb(sources, fps=None, exclude=(), skip_frames=0, stride=1, read_option
         if progress:
             progress(i / len(files), f"reading {path.name}")
         # an armature take's file is parsed once for its joints and its bones' rotations
-        bvh = parse_bvh(path) if rigs and file_suffix(path) in (".bvh", ".bvh.gz") else None
+        bvh = parse_bvh(path) if rigs and file_suffix(path) in BVH_FORMATS else None
         motion = read_motion(path, skip_frames=skip_frames, bvh=bvh, **(read_options or {}))
         warning = upright_warning(motion)
         if warning and report:
