@@ -4,6 +4,8 @@ the Blender commands of the add-on (which import bpy only when run)."""
 import os
 import sys
 
+from . import THREAD_VARIABLES, blas_threads
+
 #: OpenBLAS kernels by the x86 features they need, best first
 BLAS_KERNELS = (("SkylakeX", {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl"}),
                 ("Haswell", {"avx2", "fma"}))
@@ -35,29 +37,23 @@ def choose_blas_kernel(environ=os.environ, cpuinfo="/proc/cpuinfo"):
     return None
 
 
-#: BLAS / OpenMP threads of a command that fills, where nothing says otherwise; ``batch`` gives
-#: each worker its share of the cores, ``bench`` measures the backends as they come
-BLAS_THREADS = 4
+#: commands that set their threads themselves: ``batch`` gives each worker its share of the
+#: cores, ``bench`` measures the backends as they come
 THREADS_OF_THEIR_OWN = ("batch", "bench")
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def cap_blas_threads(argv, environ=os.environ, cores=None):
-    """At most :data:`BLAS_THREADS` BLAS / OpenMP threads (:data:`THREAD_VARIABLES`) before numpy
-    loads; returns the number set, or None where nothing was changed.
-
-    A fill runs BLAS on two threads at once (the knowledge base's models beside the copies'
-    other estimates), each with a BLAS thread per core by default: on a 16-core machine the
-    point ``auto`` of 2,048 frames took 5.6-6.6 s so, 3.8-4.3 s with 4 (numpy; 5.2-5.6
-    and 3.6-3.8 s with torch on the GPU; docs/BENCHMARKS.md, session 33). Nothing is changed
-    when one of the variables is set, numpy is already loaded, or the command divides or
-    measures the cores itself (:data:`THREADS_OF_THEIR_OWN`).
+    """The package's :func:`~mocap_gapfill.blas_threads` set in the environment
+    (:data:`~mocap_gapfill.THREAD_VARIABLES`) before numpy loads; returns the number set, or None
+    where nothing was changed: one of the variables is set, numpy is already loaded (Blender's
+    add-on limits its jobs at run time instead), or the command divides or measures the cores
+    itself (:data:`THREADS_OF_THEIR_OWN`).
     """
-    if (any(name in environ for name in THREAD_VARIABLES) or "numpy" in sys.modules
-            or (argv and argv[0] in THREADS_OF_THEIR_OWN)):
+    if "numpy" in sys.modules or (argv and argv[0] in THREADS_OF_THEIR_OWN):
         return None
-    threads = min(cores or os.cpu_count() or 1, BLAS_THREADS)
-    environ.update({name: str(threads) for name in THREAD_VARIABLES})
+    threads = blas_threads(environ, cores)
+    if threads is not None:
+        environ.update({name: str(threads) for name in THREAD_VARIABLES})
     return threads
 
 

@@ -5,14 +5,36 @@ them (``work(progress, should_cancel)``, never touching bpy), and the result is 
 the main thread in one step (``finish``), so one Ctrl-Z undoes it and a cancelled job changes
 nothing. Invoked from the UI the work runs on a thread while a modal timer shows progress and
 ESC cancels; in background mode, or called from a script, it blocks with progress.
+
+The work runs with the package's BLAS threads (:func:`~mocap_gapfill.blas_threads`, at most 4)
+where the user set none: Blender has loaded numpy long before, so the command line's way (the
+environment) comes too late here, and threadpoolctl (bundled) limits them for the job's time.
 """
 
+import contextlib
+import os
 import threading
 import time
 
 import bpy
 
+from .. import blas_threads
 from ..core.errors import GapFillError
+
+
+def blas_limit(environ=os.environ, cores=None):
+    """A context in which BLAS and OpenMP run with :func:`~mocap_gapfill.blas_threads` threads;
+    none (nothing limited) where the user set theirs or threadpoolctl is missing."""
+    threads = blas_threads(environ, cores)
+    if threads is None:
+        return contextlib.nullcontext()
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return contextlib.nullcontext()
+    import scipy.linalg  # noqa: F401  scipy's own BLAS: threadpoolctl limits only what is loaded
+
+    return threadpool_limits(limits=threads)  # BLAS and OpenMP, as the variables would
 
 
 class Job:
@@ -31,7 +53,8 @@ class Job:
 
     def run(self):
         try:
-            self.result = self.work(self.progress, lambda: self.cancelled)
+            with blas_limit():
+                self.result = self.work(self.progress, lambda: self.cancelled)
         except KeyboardInterrupt:
             self.cancelled = True
         except (GapFillError, ValueError, OSError, MemoryError) as exc:

@@ -2,7 +2,8 @@
 
 Usage: python tools/fetch_wheels.py [--python PYTHON]
 Each wheel file name is split into its distribution, version, Python tag and first platform tag,
-and fetched with ``pip download --no-deps --only-binary=:all:`` for exactly that platform.
+and fetched with ``pip download --no-deps --only-binary=:all:`` for exactly that platform (a
+pure-Python wheel, platform ``any``, as it is).
 """
 
 import argparse
@@ -27,9 +28,10 @@ def main():
             continue
         name, version, python_tag, _abi, platform = path.name[:-4].split("-")
         cmd = [args.python, "-m", "pip", "download", "--quiet", "--no-deps",
-               "--only-binary=:all:", "--implementation", "cp",
-               "--python-version", python_tag[2] + "." + python_tag[3:],
-               "--platform", platform.split(".")[0], "-d", str(target), f"{name}=={version}"]
+               "--only-binary=:all:", "-d", str(target), f"{name}=={version}"]
+        if platform != "any":
+            cmd += ["--implementation", "cp", "--python-version",
+                    python_tag[2] + "." + python_tag[3:], "--platform", platform.split(".")[0]]
         subprocess.run(cmd, check=True)
         if not path.is_file():
             sys.exit(f"pip did not produce {path.name}")

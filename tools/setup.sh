@@ -22,7 +22,7 @@ make_venv() {
   local dir=$1 python=$2
   shift 2
   [ -x "$dir/bin/python" ] || "$python" -m venv "$dir"
-  "$dir/bin/pip" install -q "$@" "ezc3d==1.7.2" pytest
+  "$dir/bin/pip" install -q "$@" "ezc3d==1.7.2" "threadpoolctl==3.7.0" pytest
   "$dir/bin/pip" install -q --no-deps -e .
 }
 

@@ -575,3 +575,32 @@ def test_max_gap_leaves_long_gaps_alone(daz_armature, daz_kb):
     assert bpy.ops.mocap_gapfill.fill_gaps() == {"FINISHED"}
     filled = {g.point for g in arm.mocap_gapfill.gaps if g.filled}
     assert filled == {"chest"}
+
+
+def test_a_job_runs_with_at_most_four_blas_threads(extension, monkeypatch):
+    """Blender loads numpy before the add-on, with a BLAS thread per core: the job limits them
+    for its own time (threadpoolctl, bundled), unless the user set theirs."""
+    import importlib
+    import os
+
+    from threadpoolctl import threadpool_info
+
+    root = importlib.import_module(LOCAL_MODULE)
+    jobs = importlib.import_module(f"{root.__name__}.addon.jobs")
+
+    def blas(progress=None, cancelled=None):
+        return {pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"}
+
+    before = blas()
+    for name in root.THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: 16)
+    job = jobs.Job(blas)
+    job.run()
+    assert job.result == {4} and blas() == before  # the user's threads back after the job
+    monkeypatch.setattr(os, "cpu_count", lambda: 3)
+    job.run()
+    assert job.result == {3}
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")  # the user's setting stands
+    job.run()
+    assert job.result == before
