@@ -65,11 +65,11 @@ def run(args, report=print):
         for plan in plans:
             for message in plan.messages:
                 report(f"{plan.owner}: {message}")
-            for gap in bpy.data.objects[plan.owner].mocap_gapfill.gaps:
-                if gap.how:  # an armature's gap: how it was filled
-                    report(f"{plan.owner}: {gap.point} {gap.first}-{gap.last}: {gap.how}"
-                           + (f"; copies: {gap.estimate:.2f} of the interpolation's error"
-                              if gap.estimate else ""))
+            owner = bpy.data.objects[plan.owner]
+            for gap in owner.mocap_gapfill.gaps:
+                if gap.how:
+                    report(f"{plan.owner}: {gap.point} {gap.first}-{gap.last}: "
+                           + "; ".join(gaps.describe(gap, owner.type == "ARMATURE")))
         report(f"filled {written} samples")
     bpy.ops.wm.save_as_mainfile(filepath=str(out), copy=True)
     report(f"saved {out}")

@@ -180,8 +180,9 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
               device="auto"):
     """Read the takes and return ``(plans, work)``: ``work(progress, should_cancel)`` fills them
     on plain arrays and returns per plan the filled positions (None for armatures filled in
-    rotation space), for armatures the solved basis matrices, and for armatures filled in
-    rotation space how each gap was filled (:class:`~..core.bonefill.GapChoice`; else None).
+    rotation space), for armatures the solved basis matrices, and how each gap was filled:
+    for armatures in rotation space its :class:`~..core.bonefill.GapChoice`, for markers
+    filled by ``auto`` its :class:`~..core.fill.GapAccount` (else None).
 
     Armatures with ``knn`` or ``auto`` are filled in the space of their gaps
     (:func:`~..core.bonefill.fill_bones`, method ``auto``): only the gapped bones' rotations
@@ -241,12 +242,14 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
                 results.append((None, *fill_armature(take, plan.bone_gaps, plan.kb, knn, step,
                                                      should_cancel, plan.messages.append)))
                 continue
-            filled = fill(take.motion(plan.missing), method, kb=plan.kb, settings=knn,
-                          progress=step, should_cancel=should_cancel).positions
+            filled, accounts = fill(take.motion(plan.missing), method, kb=plan.kb, settings=knn,
+                                    progress=step, should_cancel=should_cancel,
+                                    return_account=True)
             basis = None
-            if take.kind == "armature":
-                basis, _ = bridge.solve_armature(take, filled, plan.write)
-            results.append((filled, basis, None))
+            if take.kind == "armature":  # (joint positions: their account says nothing of bones)
+                basis, _ = bridge.solve_armature(take, filled.positions, plan.write)
+                accounts = None
+            results.append((filled.positions, basis, accounts))
         progress(1.0, "writing keys")
         return results
 
@@ -270,7 +273,7 @@ def apply_fill(context, plans, results):
     import bpy
 
     written = 0
-    for plan, (filled, basis, choices) in zip(plans, results):
+    for plan, (filled, basis, account) in zip(plans, results):
         owner = bpy.data.objects[plan.owner]
         if plan.take.kind == "markers":
             ok = plan.write & np.isfinite(filled[..., 0])
@@ -289,9 +292,10 @@ def apply_fill(context, plans, results):
                 gap.filled = bool(np.isfinite(filled[rows, j, 0]).all())
             else:
                 gap.filled = True
-            # how an armature's gap was filled in rotation space (nothing to say otherwise)
-            gap.how, gap.estimate = ("", 0.0) if choices is None else how_filled(
-                choices, gap.point, gap.first - plan.take.first, gap.last - plan.take.first)
+            # how it was filled (rotation fill of an armature, auto on markers; else nothing)
+            how = how_filled if plan.take.kind == "armature" else how_carried
+            gap.how, gap.estimate = ("", 0.0) if account is None else how(
+                account, gap.point, gap.first - plan.take.first, gap.last - plan.take.first)
         settings.showing = "RECOVERED"
     return written
 
@@ -309,3 +313,40 @@ def how_filled(choices, bone, first, last):
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0)
+
+
+#: the estimates ``auto`` blends into a marker's gap (:class:`~..core.fill.GapAccount`), in words
+SOURCES = (("rigid", "rigid partners"), ("models", "knowledge base"),
+           ("windows", "knowledge base's motion"), ("own", "take's own regression"),
+           ("spline", "spline"))
+
+
+def how_carried(accounts, point, first, last):
+    """``(how, estimate)`` of a listed gap of marker ``point`` over the take's rows
+    ``first``-``last`` from ``auto``'s accounts of the gaps it overlaps: the estimates it
+    blended, by share (those of 5 % or more, largest first; means weighted by the gaps'
+    lengths), and the copies' RMS error of the fill in millimetres (the largest where several,
+    0 where none had copies)."""
+    parts = [a for a in accounts if a.point == point and a.first <= last and a.last >= first]
+    if not parts:
+        return "", 0.0
+    lengths = [a.last - a.first + 1 for a in parts]
+    shares = [(float(np.average([getattr(a, field) for a in parts], weights=lengths)), label)
+              for field, label in SOURCES]
+    how = ", ".join(f"{label} {share:.0%}" for share, label in sorted(shares, reverse=True)
+                    if share >= 0.05)
+    judged = [a.estimate for a in parts if np.isfinite(a.estimate)]
+    return how, 1000.0 * max(judged, default=0.0)
+
+
+def describe(gap, armature):
+    """How a filled gap was filled, in lines of words (the panel and ``blend`` say them)."""
+    if not gap.how:
+        return []
+    if armature and gap.how == "interp":
+        return ["Blender's interpolation kept", "(no fill was judged better there)"]
+    if armature:
+        return [f"filled by {gap.how}"] + (
+            [f"copies: {gap.estimate:.2f} of the interpolation's error"] if gap.estimate else [])
+    return [f"from {gap.how}"] + (
+        [f"copies: about {gap.estimate:.0f} mm RMS error"] if gap.estimate else [])

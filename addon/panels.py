@@ -2,21 +2,32 @@
 
 import bpy
 
-from . import bridge, prefs
+from . import bridge, gaps, prefs
 
 
 class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
     """Gaps of a take: point, frames, kind; filled gaps carry a check mark (an armature's gap
-    where the interpolation was kept, a curve)"""
+    where the interpolation was kept, a curve) and a marker's the copies' estimate of its error"""
+
+    worst_first: bpy.props.BoolProperty(
+        name="Worst First", description="Order the gaps by the copies' estimate of the fill's "
+        "error, largest first, to review those first")
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         icons = {"MISSING": "ERROR", "SUSPECT": "QUESTION", "MARKED": "BOOKMARKS"}
         row = layout.row(align=True)
         row.label(text=item.point, icon=icons[item.kind])
         row.label(text=f"{item.first}-{item.last} ({item.last - item.first + 1})")
+        if item.estimate and data.id_data.type != "ARMATURE":
+            row.label(text=f"~{item.estimate:.0f} mm")
         # filled (an armature's gap where Blender's interpolation was kept: its curve icon)
         row.label(text="", icon="IPO_LINEAR" if item.how == "interp" else
                   "CHECKMARK" if item.filled else "BLANK1")
+
+    def draw_filter(self, context, layout):
+        row = layout.row(align=True)
+        row.prop(self, "filter_name", text="")
+        row.prop(self, "worst_first", text="", icon="SORT_DESC")
 
     def filter_items(self, context, data, propname):
         items = getattr(data, propname)
@@ -24,7 +35,13 @@ class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
         if self.filter_name:
             needle = self.filter_name.lower()
             flags = [self.bitflag_filter_item if needle in g.point.lower() else 0 for g in items]
-        return flags, []
+        order = []
+        if self.worst_first:  # item i shows at row order[i]
+            order = [0] * len(items)
+            ranked = sorted(range(len(items)), key=lambda i: -items[i].estimate)
+            for row, i in enumerate(ranked):
+                order[i] = row
+        return flags, order
 
 
 class MOCAP_GAPFILL_UL_points(bpy.types.UIList):
@@ -115,25 +132,17 @@ class MOCAP_GAPFILL_PT_gaps(_Panel, bpy.types.Panel):
         column.operator("mocap_gapfill.remove_gap", text="", icon="X")
         column.operator("mocap_gapfill.revert_gap", text="", icon="LOOP_BACK")
         if 0 <= settings.gap_index < len(settings.gaps) and settings.gaps[settings.gap_index].how:
-            _how_filled(layout.box().column(align=True), settings.gaps[settings.gap_index])
+            gap = settings.gaps[settings.gap_index]
+            column = layout.box().column(align=True)
+            column.label(text=f"{gap.point} {gap.first}-{gap.last}:", icon="INFO")
+            for line in gaps.describe(gap, owner.type == "ARMATURE"):
+                column.label(text=line)
         layout.prop(context.scene.mocap_gapfill, "detect_suspects")
         if len(settings.points):
             layout.label(text=f"Points with gaps ({settings.frames} frames):")
             layout.template_list("MOCAP_GAPFILL_UL_points", "", settings, "points", settings,
                                  "point_index", rows=3)
         layout.prop(settings, "units")
-
-
-def _how_filled(column, gap):
-    """How the selected gap of an armature was filled, in words."""
-    column.label(text=f"{gap.point} {gap.first}-{gap.last}:", icon="INFO")
-    if gap.how == "interp":
-        column.label(text="Blender's interpolation kept")
-        column.label(text="(no fill was judged better there)")
-        return
-    column.label(text=f"filled by {gap.how}")
-    if gap.estimate:
-        column.label(text=f"copies: {gap.estimate:.2f} of the interpolation's error")
 
 
 class MOCAP_GAPFILL_PT_fill(_Panel, bpy.types.Panel):

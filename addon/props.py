@@ -58,11 +58,13 @@ class MOCAP_GAPFILL_PG_gap(bpy.types.PropertyGroup):
     last: IntProperty(name="Last frame")
     kind: EnumProperty(name="Kind", items=GAP_KINDS, default="MISSING")
     filled: BoolProperty(name="Filled", description="Recovered keys were written for this gap")
-    how: StringProperty(name="Filled by", description="How an armature's gap was filled: the "
-                        "fill it took, or interp where Blender's interpolation was kept")
+    how: StringProperty(name="Filled by", description="How the gap was filled: an armature's, "
+                        "the fill it took (interp where Blender's interpolation was kept); a "
+                        "marker's, the estimates blended into it and their shares")
     estimate: FloatProperty(name="Estimate", min=0.0, description=(
-        "The fill's RMS error on copies of the gap (the same bone and length, where it is "
-        "keyed) as a share of Blender's interpolation's; 0 where no copies judged it"))
+        "The fill's RMS error on copies of the gap (the same point and length, where it is "
+        "keyed): an armature's as a share of Blender's interpolation's, a marker's in "
+        "millimetres; 0 where no copies judged it"))
 
 
 class MOCAP_GAPFILL_PG_point(bpy.types.PropertyGroup):

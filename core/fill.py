@@ -1,6 +1,7 @@
 """One entry point for every gap-filling method: :func:`fill`."""
 
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -76,8 +77,33 @@ AUTO_COPIES_ITERATIONS = 10
 AUTO_COPIES_QUERY_NOISE = 0.25
 
 
+@dataclass(frozen=True)
+class GapAccount:
+    """How ``auto`` filled one gap of a point (``fill(..., return_account=True)``).
+
+    ``point``: its name; ``first``, ``last``: its frames (rows, inclusive). The shares of the
+    estimates in its fill, as ``auto`` weighed them on the point's copies (they sum to 1):
+    ``rigid`` (the rigid partners), ``models`` (the knowledge base's local models), ``windows``
+    (the knowledge base's windows of motion), ``own`` (the take's own regression on the rest of
+    the body), ``spline`` (a spline through the take, short gaps). Where an estimate has no value
+    at some frame (no rigid donors there) the others fill it alone. ``estimate``: the fill's RMS
+    error in metres on copies of the point's gaps (the point hidden where it is observed,
+    refilled as the gaps were): what ``auto`` expects here, not a measurement of the gap; NaN
+    where the point had no copies."""
+
+    point: str
+    first: int
+    last: int
+    rigid: float
+    models: float
+    windows: float
+    own: float
+    spline: float
+    estimate: float = float("nan")
+
+
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
-         report=None, max_gap=None):
+         report=None, max_gap=None, return_account=False):
     """Fill the gaps of a motion with the named method.
 
     Parameters
@@ -92,11 +118,17 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
 
     max_gap : int, optional
         Gaps longer than this many frames are left unfilled.
+    return_account : bool
+        Also return how ``auto`` filled each gap.
 
     Returns
     -------
     Motion
         Observed samples unchanged, missing ones filled and flagged in ``filled``.
+    list of GapAccount or None
+        With ``return_account``: for ``auto``, per gap (run of missing frames of a point, in
+        point order) its :class:`GapAccount`, the gaps ``max_gap`` left out included; None for
+        the other methods.
     """
     if method not in METHODS:
         raise GapFillError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
@@ -104,15 +136,19 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
         raise GapFillError(f"method {method!r} needs a knowledge base (-k KB.npz); without "
                            "one, 'rigid' fills markers from their rigid partners")
     if not motion.missing.any():
-        return motion
-    out = _fill(motion, method, kb, settings, progress, should_cancel, report)
+        return (motion, [] if method == "auto" else None) if return_account else motion
+    accounts = None
+    if method == "auto":
+        out, accounts = _fill_auto(motion, kb, settings, progress, should_cancel, report)
+    else:
+        out = _fill(motion, method, kb, settings, progress, should_cancel, report)
     if max_gap:
         kept = np.zeros(motion.missing.shape, dtype=bool)
         for p, a, b in motion.gap_runs():
             kept[a:b + 1, p] = b - a + 1 > max_gap
         out = out.replace(positions=np.where(kept[..., None], np.nan, out.positions),
                           filled=out.filled & ~kept if out.filled is not None else None)
-    return out
+    return (out, accounts) if return_account else out
 
 
 def _fill(motion, method, kb, settings, progress, should_cancel, report):
@@ -121,8 +157,6 @@ def _fill(motion, method, kb, settings, progress, should_cancel, report):
 
         return fill_knn(motion, kb, settings or KnnSettings(), progress=progress,
                         should_cancel=should_cancel, report=report)
-    if method == "auto":
-        return _fill_auto(motion, kb, settings, progress, should_cancel, report)
     if method == "pca":
         common, _ = match_names(kb, motion.names)
         sub = motion.select(common)
@@ -249,8 +283,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
-        (on_copies, _), matched, regressed = estimates.result()
+        (on_copies, copies_spread), matched, regressed = estimates.result()
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point
+    # within the knowledge base's estimate, the windows' share and the take's regression's
+    windows, own = np.zeros(motion.n_points), np.zeros(motion.n_points)
+    per_sample = np.full(motion.n_points, np.nan)  # the fill's squared error on its copies
+    eased = {}  # short gaps blended with a spline: the spline's share and the error expected
     if probe.any():
         def on_copies_of(out):
             """Per point, the squared error summed over its copies (a method that left some
@@ -309,16 +347,52 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
         spline = baselines.fill_spline(motion.positions)
         out = _with_spline_ends(motion, out, copies, probe, spline, weight == 0, report)
-        out = _with_spline(motion, out, spline, per_sample, weight == 0,
-                           lambda hidden: carried(motion.replace(positions=np.where(
-                               hidden[..., None], np.nan, motion.positions)), hidden)[0], report)
+        out, eased = _with_spline(motion, out, spline, per_sample, weight == 0,
+                                  lambda hidden: carried(motion.replace(positions=np.where(
+                                      hidden[..., None], np.nan, motion.positions)), hidden)[0],
+                                  report)
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
     report(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped points "
            f"more than the knowledge base"
            + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
               f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
-    return _with_fill(motion, out)
+    accounts = []
+    harder = _harder_for_partners(missing, probe, spread, copies_spread, weight)
+    for p, a, b in gap_runs(missing):
+        spline_share, squared = eased.get((p, a), (0.0, per_sample[p] * harder(p, a, b)))
+        kb_share = weight[p] * (1 - spline_share)
+        accounts.append(GapAccount(
+            motion.names[p], a, b, rigid=float((1 - weight[p]) * (1 - spline_share)),
+            models=float(kb_share * (1 - windows[p]) * (1 - own[p])),
+            windows=float(kb_share * windows[p] * (1 - own[p])), own=float(kb_share * own[p]),
+            spline=float(spline_share),
+            estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
+    return _with_fill(motion, out), accounts
+
+
+def _harder_for_partners(missing, probe, spread, copies_spread, weight):
+    """``harder(p, a, b)``: how much harder than its copies the gap ``a``-``b`` of point ``p`` is
+    for the fill, as a factor of the copies' squared error: the rigid estimate's share of it
+    scaled by its donors' mean squared spread over the gap against over the copies (one of a
+    point's gaps whose steadiest partners are out of sight too is filled worse than the copies
+    foretell), the knowledge base's share as it is. Where either spread is unknown, 1. On the
+    CMU marker tuning takes this ranked each take's gaps closer to how they came out (Spearman
+    0.50-0.52 -> 0.56-0.60; docs/METHOD_NOTES.md, session 34)."""
+    with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # points without spread: nan
+        on_copies = (np.nanmean(np.where(probe, copies_spread ** 2, np.nan), axis=0)
+                     if copies_spread is not None else np.full(missing.shape[1], np.nan))
+
+    def harder(p, a, b):
+        with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ratio = np.nanmean(spread[a:b + 1, p] ** 2) / on_copies[p]
+        if not np.isfinite(ratio) or ratio <= 0:
+            return 1.0
+        return (1 - weight[p]) * ratio + weight[p]
+
+    return harder
 
 
 def _mix_in(knn, other, share):
@@ -424,7 +498,8 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     any estimate carried from other points; over longer gaps its error grows fast, with a tail
     its copies do not foresee, so only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part.
     Gaps at the take's ends (no spline across them) and points without a finite ``e_out`` keep
-    ``out``."""
+    ``out``. Returns the blend and, per gap blended (``(point, first frame)``), the spline's
+    share and the blend's expected squared error (the two errors as if independent)."""
     from .baselines import fill_spline
 
     missing = motion.missing
@@ -445,7 +520,7 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
         if starts:
             copies.append((p, a, b, starts))
     if not copies:
-        return out
+        return out, {}
     error = [np.sum((fill_spline(np.where(hidden[..., None], np.nan, motion.positions))
                      - motion.positions) ** 2, axis=2) if hidden.any() else None
              for hidden in rounds]
@@ -454,8 +529,7 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
         rigid_error = [np.sum((rigid_of(hidden) - motion.positions) ** 2, axis=2)
                        if hidden.any() else None
                        for hidden in rounds]
-    out = out.copy()
-    eased = 0
+    out, shares = out.copy(), {}
     for p, a, b, starts in copies:
         e_spline = np.mean([error[k][s:s + b - a + 1, p].mean() for k, s in starts])
         e_here = e_out[p]
@@ -464,11 +538,12 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
             e_here = e_rigid if np.isfinite(e_rigid) else e_here
         share = e_here / (e_here + e_spline + 1e-24)
         out[a:b + 1, p] = (1 - share) * out[a:b + 1, p] + share * spline[a:b + 1, p]
-        eased += share >= 0.5
+        shares[p, a] = share, (1 - share) ** 2 * e_here + share ** 2 * e_spline
+    eased = sum(share >= 0.5 for share, _ in shares.values())
     if eased:
         report(f"auto: a spline through the take carries {eased} of {len(copies)} gaps more "
                f"than the other estimates")
-    return out
+    return out, shares
 
 
 def _spline_frames(fps):

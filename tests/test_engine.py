@@ -12,6 +12,7 @@ from mocap_gapfill.core.fill import BASELINES, DEFAULT_METHOD, METHODS, fill, va
 from mocap_gapfill.core.io import read_motion
 from mocap_gapfill.core.kb import build_kb, load_kb, resample
 from mocap_gapfill.core.normalize import find_reference, frames_of, normalize
+from mocap_gapfill.core.motion import gap_runs
 from mocap_gapfill.core.recover import KnnSettings
 from mocap_gapfill.core.search import KBIndex, knn_oracle
 
@@ -497,6 +498,35 @@ def test_auto_beats_the_studio_fills_on_a_busy_marker_capture(data_dir):
     print(scores)
     assert scores["auto"] < 0.8 * min(scores["rigid"], scores["pattern"], scores["knn"])
     assert scores["knn"] < 0.93 * scores["knn, one pass"]
+
+
+def test_auto_accounts_for_each_gap_and_its_estimate_ranks_them(data_dir):
+    """``fill(..., return_account=True)``: per gap the estimates ``auto`` blended (shares that
+    sum to 1) and the copies' RMS error, scaled per gap by how far its rigid donors spread, which
+    ranks the gaps roughly as they came out (85_02, 30 % of the markers gone per half second;
+    measured: Spearman 0.35 over 118 gaps, 0.26 with the point's copies alone; the realised
+    error 0.68 of the estimate in the median - the copies are harder than the gaps)."""
+    from scipy.stats import spearmanr
+
+    c3d = data_dir / "cmu/c3d"
+    jump = read_motion(c3d / "85_02.c3d")
+    kb = build_kb([c3d / "01_01.c3d", c3d / "135_02.c3d"])
+    miss = punch_gaps(jump.n_frames, jump.n_points, "markers", 0.3, np.random.default_rng(0))
+    out, accounts = fill(with_gaps(jump, miss), "auto", kb=kb, return_account=True)
+    assert [(jump.names.index(a.point), a.first, a.last) for a in accounts] == gap_runs(miss)
+    shares = np.array([[a.rigid, a.models, a.windows, a.own, a.spline] for a in accounts])
+    assert (shares >= 0).all() and np.allclose(shares.sum(axis=1), 1.0)
+    assert shares[:, 0].mean() > 0.5 and shares[:, 1].max() > 0.5  # both rigid and the KB lead
+    error = np.linalg.norm(out.positions - jump.positions, axis=2)
+    realised = np.array([np.sqrt(np.mean(error[a.first:a.last + 1, jump.names.index(a.point)] ** 2))
+                         for a in accounts])
+    estimate = np.array([a.estimate for a in accounts])
+    assert np.isfinite(estimate).all()
+    rho = spearmanr(estimate, realised).statistic
+    ratio = np.median(realised / estimate)
+    print(f"{len(accounts)} gaps: Spearman {rho:.2f}, realised / estimate {ratio:.2f}")
+    assert rho > 0.3 and 0.5 < ratio < 1.0
+    assert fill(with_gaps(jump, miss), "linear", return_account=True)[1] is None
 
 
 def test_auto_weighs_its_methods_with_a_cheaper_fill_of_the_copies(data_dir, monkeypatch):
