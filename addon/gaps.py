@@ -5,7 +5,7 @@ which only sees arrays.
 """
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -249,6 +249,9 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
             if take.kind == "armature":  # (joint positions: their account says nothing of bones)
                 basis, _ = bridge.solve_armature(take, filled.positions, plan.write)
                 accounts = None
+            elif accounts is not None:  # by the listed names (objects), not the labels
+                accounts = [replace(a, point=take.points[take.names.index(a.point)])
+                            for a in accounts]
             results.append((filled.positions, basis, accounts))
         progress(1.0, "writing keys")
         return results
@@ -294,7 +297,7 @@ def apply_fill(context, plans, results):
                 gap.filled = True
             # how it was filled (rotation fill of an armature, auto on markers; else nothing)
             how = how_filled if plan.take.kind == "armature" else how_carried
-            gap.how, gap.estimate = ("", 0.0) if account is None else how(
+            gap.how, gap.estimate = ("", 0.0) if account is None or not gap.filled else how(
                 account, gap.point, gap.first - plan.take.first, gap.last - plan.take.first)
         settings.showing = "RECOVERED"
     return written

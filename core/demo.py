@@ -149,10 +149,19 @@ def _real_markers(outdir, scores, report):
     truth = complete_take(take, kb.names)
     miss = punch_gaps(truth.n_frames, truth.n_points, "markers", 0.1, np.random.default_rng(0))
     query = with_gaps(truth, miss)
-    for method in (DEFAULT_METHOD, "rigid", "linear"):
+    filled, accounts = fill(query, DEFAULT_METHOD, kb=kb, return_account=True)
+    scores[(REAL_MARKERS, DEFAULT_METHOD)] = rmse_mm(filled, truth, miss)
+    for method in ("rigid", "linear"):
         scores[(REAL_MARKERS, method)] = rmse_mm(fill(query, method, kb=kb), truth, miss)
     report("  10 % of the markers hidden per 60 frames, RMSE over them: " + ", ".join(
         f"{m} {scores[(REAL_MARKERS, m)]:.1f} mm" for m in (DEFAULT_METHOD, "rigid", "linear")))
+    # what a technician reviews first: the gaps whose copies expect the largest error
+    error = np.linalg.norm(filled.positions - truth.positions, axis=2)
+    worst = sorted((a for a in accounts if np.isfinite(a.estimate)), key=lambda a: -a.estimate)
+    report("  gaps to review first, by what copies of them expect (came out): " + ", ".join(
+        f"{a.point} {a.first + 1}-{a.last + 1} ~{1000 * a.estimate:.0f} mm "
+        f"({1000 * np.sqrt(np.mean(error[a.first:a.last + 1, truth.names.index(a.point)] ** 2)):.0f})"
+        for a in worst[:3]))
 
 
 def bone_scores(rig, channels, location, gaps, fps, kb, methods):

@@ -68,6 +68,25 @@ MARKER_GAPS = (("LELB", 100, 189), ("RKNE", 300, 389), ("LFHD", 1, 60), ("RTOE",
                ("LWRA", 400, 519))
 
 
+def test_a_second_marker_set_of_the_same_labels_says_how_its_gaps_were_filled(scene, data_dir,
+                                                                               marker_kb):
+    """Blender names the second import's empties LELB.001, ...: the fill's account (by label)
+    reaches the listed gaps (by object) all the same."""
+    bpy = pytest.importorskip("bpy")
+    path = data_dir / "cmu/c3d/85_02.c3d"
+    for _ in range(2):
+        assert bpy.ops.mocap_gapfill.import_markers(filepath=str(path)) == {"FINISHED"}
+    root = bpy.context.active_object
+    delete_keys(bpy.data.objects["LELB.001"], 100, 189)
+    scene.mocap_gapfill.detect_suspects = False
+    assert bpy.ops.mocap_gapfill.detect_gaps() == {"FINISHED"}
+    scene.mocap_gapfill.kb_path = str(marker_kb)
+    assert bpy.ops.mocap_gapfill.fill_gaps(scope="ALL") == {"FINISHED"}
+    (gap,) = root.mocap_gapfill.gaps
+    assert (gap.point, gap.filled) == ("LELB.001", True)
+    assert gap.how.startswith("rigid partners") and gap.estimate > 0
+
+
 def test_c3d_markers_detect_fill_preview(scene, data_dir, marker_kb):
     from mocap_gapfill.core.fill import fill
     from mocap_gapfill.core.io import read_motion
