@@ -36,11 +36,9 @@ class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
             needle = self.filter_name.lower()
             flags = [self.bitflag_filter_item if needle in g.point.lower() else 0 for g in items]
         order = []
-        if self.worst_first:  # item i shows at row order[i]
-            order = [0] * len(items)
-            ranked = sorted(range(len(items)), key=lambda i: -items[i].estimate)
-            for row, i in enumerate(ranked):
-                order[i] = row
+        if self.worst_first:
+            order = bpy.types.UI_UL_list.sort_items_helper(
+                [(i, g.estimate) for i, g in enumerate(items)], key=lambda item: -item[1])
         return flags, order
 
 
