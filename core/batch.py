@@ -39,8 +39,11 @@ TAKE_SUFFIXES = (".c3d", ".bvh", ".bvh.gz", ".amc", ".blend")
 ENGINES = ("local", "ray", "dask")
 FORMATS = ("same", "c3d", "npz", "csv")
 MANIFEST = "manifest.jsonl"
-REPORT_FIELDS = ("input", "output", "status", "gaps", "samples_filled", "longest_gap", "method",
-                 "seconds", "peak_mb", "error")
+REPORT_FIELDS = ("input", "output", "status", "gaps", "samples_filled", "longest_gap",
+                 "expected_mm", "review_first", "method", "seconds", "peak_mb", "error")
+#: gaps a take's row names to review first (``auto`` on a motion file: the largest errors its
+#: copies expect, :func:`~.fill.worst_first`)
+REVIEW_FIRST = 3
 
 
 @dataclass
@@ -158,19 +161,22 @@ def _peak_mb():
 
 
 def _motion_take(source, output, options):
-    from .fill import fill
+    from .fill import fill, worst_first
     from .io import read_motion, write_motion
     from .models import KnnSettings
 
     motion = read_motion(source)
     runs = motion.gap_runs()
     kb = _knowledge_base(options.kb, motion.names, options.method)
-    out = fill(motion, options.method, kb=kb,
-               settings=KnnSettings(k=options.k, device=options.device),
-               max_gap=options.max_gap or None)
+    out, accounts = fill(motion, options.method, kb=kb,
+                         settings=KnnSettings(k=options.k, device=options.device),
+                         max_gap=options.max_gap or None, return_account=True)
     write_motion(out, output, overwrite=True)
+    worst = worst_first(accounts or [])[:REVIEW_FIRST]
     return {"gaps": len(runs), "longest_gap": max((b - a + 1 for _, a, b in runs), default=0),
-            "samples_filled": int((motion.missing & ~out.missing).sum())}
+            "samples_filled": int((motion.missing & ~out.missing).sum()),
+            "expected_mm": round(1000 * worst[0].estimate, 1) if worst else "",
+            "review_first": "; ".join(a.summary() for a in worst)}
 
 
 def _blend_take(source, output, options):

@@ -11,10 +11,12 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from .errors import GapFillError
 from .backend import DEVICES
-from .fill import BASELINES, DEFAULT_METHOD, METHODS
-from .io import READ_FORMATS, WRITE_FORMATS, read_motion, write_motion
+from .fill import BASELINES, DEFAULT_METHOD, METHODS, worst_first
+from .io import READ_FORMATS, WRITE_FORMATS, atomic_output, read_motion, write_motion
 from .motion import UNIT_SCALES
 
 
@@ -93,6 +95,12 @@ def _check_output(dst, force, src=None):
 def cmd_convert(args):
     src, dst = Path(args.input), Path(args.output)
     _check_output(dst, args.force, src)
+    if args.gap_report:
+        if args.method != "auto":
+            raise GapFillError("--gap-report says how auto filled each gap: use --method auto")
+        if Path(args.gap_report).suffix.lower() not in (".csv", ".json"):
+            raise GapFillError(f"--gap-report {args.gap_report}: name a .csv or .json file")
+        _check_output(Path(args.gap_report), args.force, src)
     motion = _read(src, args)
     write_motion(motion, dst, overwrite=args.force)
     print(f"wrote {dst} ({motion.n_frames} frames, {motion.n_points} points)")
@@ -150,6 +158,12 @@ def cmd_fill(args):
 
     src, dst = Path(args.input), Path(args.output)
     _check_output(dst, args.force, src)
+    if args.gap_report:
+        if args.method != "auto":
+            raise GapFillError("--gap-report says how auto filled each gap: use --method auto")
+        if Path(args.gap_report).suffix.lower() not in (".csv", ".json"):
+            raise GapFillError(f"--gap-report {args.gap_report}: name a .csv or .json file")
+        _check_output(Path(args.gap_report), args.force, src)
     motion = _read(src, args)
     kb = load_kb(args.kb) if args.kb else None
     if kb is None and args.method in NEEDS_KB:
@@ -162,15 +176,47 @@ def cmd_fill(args):
         _report(f"no -k given: the starter knowledge base {path.name} ({kb.size} poses of CMU "
                 "motion)")
     progress = Progress(args.quiet)
-    out = fill(motion, args.method, kb=kb, settings=KnnSettings(k=args.k, device=args.device),
-               progress=progress, report=_report, max_gap=args.max_gap)
+    out, accounts = fill(motion, args.method, kb=kb, progress=progress, report=_report,
+                         settings=KnnSettings(k=args.k, device=args.device),
+                         max_gap=args.max_gap, return_account=True)
     progress.done()
     write_motion(out, dst, overwrite=args.force)
     n_filled = int((motion.missing & ~out.missing).sum())
     left = int(out.missing.sum())
     print(f"wrote {dst}: filled {n_filled} samples with {args.method}"
           + (f", {left} left missing" if left else ""))
+    if accounts and worst_first(accounts):
+        print("review first (what copies of the gaps expect of the error): "
+              + ", ".join(a.summary() for a in worst_first(accounts)[:3]))
+    if args.gap_report:
+        _write_gap_report(accounts, Path(args.gap_report))
+        print(f"wrote {args.gap_report}: {len(accounts)} gaps, worst first")
     return 0
+
+
+#: the columns of ``fill --gap-report`` (shares of auto's estimates, the copies' RMS error)
+GAP_REPORT_FIELDS = ("point", "first_frame", "last_frame", "frames", "expected_mm", "rigid",
+                     "models", "windows", "own", "spline")
+
+
+def _write_gap_report(accounts, path):
+    """Each gap's :class:`~.fill.GapAccount`, the largest expected error first (gaps without
+    copies last), as CSV or JSON by ``path``'s extension."""
+    import csv
+
+    ordered = worst_first(accounts) + [a for a in accounts if not np.isfinite(a.estimate)]
+    rows = [{"point": a.point, "first_frame": a.first + 1, "last_frame": a.last + 1,
+             "frames": a.last - a.first + 1,
+             "expected_mm": round(1000 * a.estimate, 2) if np.isfinite(a.estimate) else None,
+             **{k: round(getattr(a, k), 4) for k in GAP_REPORT_FIELDS[5:]}} for a in ordered]
+    with atomic_output(path, overwrite=True) as tmp:
+        if path.suffix.lower() == ".json":
+            tmp.write_text(json.dumps(rows, indent=1))
+        else:
+            with open(tmp, "w", newline="") as f:
+                writer = csv.DictWriter(f, GAP_REPORT_FIELDS)
+                writer.writeheader()
+                writer.writerows(rows)
 
 
 def cmd_batch(args):
@@ -196,6 +242,12 @@ def cmd_batch(args):
             where = "" if row["error"].startswith(row["input"]) else f"{row['input']}: "
             print(f"failed: {where}{row['error']}", file=sys.stderr)
     print(f"{summary(rows, len(rows))}; report: {Path(args.output) / 'report.csv'}")
+    judged = sorted((r for r in rows if r.get("expected_mm") not in (None, "")),
+                    key=lambda r: -r["expected_mm"])
+    if judged:
+        print("takes to review first (the largest error copies of their gaps expect): "
+              + ", ".join(f"{Path(r['input']).name} ({r['review_first'].split('; ')[0]})"
+                          for r in judged[:3]))
     return 1 if any(row["status"] == "failed" for row in rows) else 0
 
 
@@ -312,7 +364,10 @@ def build_parser(extra=None):
     p.add_argument("--device", default="auto", choices=DEVICES,
                    help="knn search and models: auto (torch on a CUDA GPU, else torch on the CPU, "
                         "else numpy), numpy, cpu (torch), cuda (torch)")
-    p.add_argument("--force", action="store_true", help="replace the output if it exists")
+    p.add_argument("--gap-report", metavar="OUT", help="auto: write per gap the estimates it "
+                   "blended and what copies of the gap expect of the error, to review the worst "
+                   "first (.csv or .json by extension; frames counted from 1)")
+    p.add_argument("--force", action="store_true", help="replace the outputs if they exist")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     _add_read_options(p)
     p.set_defaults(func=cmd_fill)

@@ -23,7 +23,7 @@ import numpy as np
 from . import synth
 from .evaluate import (bone_errors, complete_take, kb_without, punch_gaps, rmse_mm, subject_of,
                        with_gaps)
-from .fill import DEFAULT_METHOD, fill
+from .fill import DEFAULT_METHOD, fill, worst_first
 from .io import read_motion, write_motion
 from .kb import STARTER_DIR, kb_from_motions, motion_turns, starter_kb
 from .motion import gap_runs
@@ -157,11 +157,10 @@ def _real_markers(outdir, scores, report):
         f"{m} {scores[(REAL_MARKERS, m)]:.1f} mm" for m in (DEFAULT_METHOD, "rigid", "linear")))
     # what a technician reviews first: the gaps whose copies expect the largest error
     error = np.linalg.norm(filled.positions - truth.positions, axis=2)
-    worst = sorted((a for a in accounts if np.isfinite(a.estimate)), key=lambda a: -a.estimate)
     report("  gaps to review first, by what copies of them expect (came out): " + ", ".join(
-        f"{a.point} {a.first + 1}-{a.last + 1} ~{1000 * a.estimate:.0f} mm "
+        f"{a.summary()} "
         f"({1000 * np.sqrt(np.mean(error[a.first:a.last + 1, truth.names.index(a.point)] ** 2)):.0f})"
-        for a in worst[:3]))
+        for a in worst_first(accounts)[:3]))
 
 
 def bone_scores(rig, channels, location, gaps, fps, kb, methods):

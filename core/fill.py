@@ -101,6 +101,17 @@ class GapAccount:
     spline: float
     estimate: float = float("nan")
 
+    def summary(self):
+        """``LTOE 1861-1920 ~57 mm``: the point, its frames counted from 1, the estimate."""
+        return (f"{self.point} {self.first + 1}-{self.last + 1} "
+                + (f"~{1000 * self.estimate:.0f} mm" if np.isfinite(self.estimate) else
+                   "(no copies)"))
+
+
+def worst_first(accounts):
+    """The gaps' accounts that have an estimate, the largest first: the order to review them."""
+    return sorted((a for a in accounts if np.isfinite(a.estimate)), key=lambda a: -a.estimate)
+
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
          report=None, max_gap=None, return_account=False):
@@ -126,9 +137,9 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
     Motion
         Observed samples unchanged, missing ones filled and flagged in ``filled``.
     list of GapAccount or None
-        With ``return_account``: for ``auto``, per gap (run of missing frames of a point, in
-        point order) its :class:`GapAccount`, the gaps ``max_gap`` left out included; None for
-        the other methods.
+        With ``return_account``: for ``auto``, per gap it filled (run of missing frames of a
+        point, in point order; not those ``max_gap`` left out or no estimate could place) its
+        :class:`GapAccount`; None for the other methods.
     """
     if method not in METHODS:
         raise GapFillError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
@@ -148,6 +159,9 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
             kept[a:b + 1, p] = b - a + 1 > max_gap
         out = out.replace(positions=np.where(kept[..., None], np.nan, out.positions),
                           filled=out.filled & ~kept if out.filled is not None else None)
+    if accounts is not None:
+        index = {name: p for p, name in enumerate(motion.names)}
+        accounts = [a for a in accounts if not out.missing[a.first:a.last + 1, index[a.point]].all()]
     return (out, accounts) if return_account else out
 
 

@@ -141,6 +141,13 @@ def test_the_knowledge_base_fills_a_batch_as_it_fills_one_file(library, data_dir
     for row in rows[:4]:
         assert row["status"] == "filled", row["error"]
         assert _same_as_fill(Path(row["input"]), Path(row["output"]), options, kb)
+    # each take names the gaps to review first, with the largest error their copies expect
+    for row in rows:
+        worst = row["review_first"].split("; ")
+        assert row["expected_mm"] > 0 and 1 <= len(worst) <= 3, row
+        assert abs(float(worst[0].split("~")[1].split(" mm")[0]) - row["expected_mm"]) < 0.6
+    report = (tmp_path / "out" / "report.csv").read_text().splitlines()
+    assert "expected_mm,review_first" in report[0]
 
 
 def _children(pid):

@@ -104,6 +104,47 @@ def test_kb_build_then_fill(data_dir, tmp_path):
     assert "no starter knowledge base fits this take" in r.stderr and "P0" in r.stderr
 
 
+def test_fill_reports_each_gap_worst_first(data_dir, tmp_path):
+    """``--gap-report``: per gap auto filled, the estimates' shares and what copies of it expect
+    of the error, the largest first (CSV or JSON); the worst three on the command line too."""
+    import csv
+
+    from mocap_gapfill.core.evaluate import punch_gaps, with_gaps
+    from mocap_gapfill.core.motion import gap_runs
+
+    take = read_motion(data_dir / "cmu/c3d/85_02.c3d")
+    miss = punch_gaps(take.n_frames, take.n_points, "markers", 0.1, np.random.default_rng(0))
+    src = tmp_path / "gapped.c3d"
+    write_motion(with_gaps(take, miss).replace(filled=None), src)
+    r = cli("fill", src, "-o", tmp_path / "out.c3d", "--gap-report", tmp_path / "gaps.csv",
+            "--quiet")
+    assert r.returncode == 0, r.stderr
+    with open(tmp_path / "gaps.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(gap_runs(miss)) == 50
+    expected = [float(row["expected_mm"]) for row in rows]
+    assert expected == sorted(expected, reverse=True) and expected[-1] > 0
+    for row in rows:
+        shares = [float(row[k]) for k in ("rigid", "models", "windows", "own", "spline")]
+        first, last = int(row["first_frame"]), int(row["last_frame"])
+        assert abs(sum(shares) - 1) < 1e-3 and int(row["frames"]) == last - first + 1
+        assert miss[first - 1:last, take.names.index(row["point"])].all()
+    worst = f"{rows[0]['point']} {rows[0]['first_frame']}-{rows[0]['last_frame']}"
+    assert f"review first (what copies of the gaps expect of the error): {worst} ~" in r.stdout
+    r = cli("fill", src, "-o", tmp_path / "out2.c3d", "--gap-report", tmp_path / "gaps.json",
+            "--max-gap", "30", "--quiet")
+    short = json.loads((tmp_path / "gaps.json").read_text())  # only the gaps it filled
+    assert r.returncode == 0 and len(short) == sum(b - a < 30 for _, a, b in gap_runs(miss)) == 4
+    assert all(row["frames"] <= 30 for row in short)
+    r = cli("fill", src, "-o", tmp_path / "out3.c3d", "--gap-report", tmp_path / "gaps.json",
+            "--quiet")
+    assert r.returncode == 2 and "gaps.json exists" in r.stderr  # never replaced silently
+    r = cli("fill", src, "-o", tmp_path / "out3.c3d", "--method", "rigid", "--gap-report",
+            tmp_path / "rigid.csv")
+    assert r.returncode == 2 and "use --method auto" in r.stderr
+    assert not (tmp_path / "out3.c3d").exists()  # checked before anything is filled
+
+
 def test_evaluate_writes_json(data_dir, tmp_path):
     out = tmp_path / "eval.json"
     r = cli("evaluate", "--protocol", "markers", "--settings", "rate=0.1", "--fps", "120",
