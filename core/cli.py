@@ -95,12 +95,6 @@ def _check_output(dst, force, src=None):
 def cmd_convert(args):
     src, dst = Path(args.input), Path(args.output)
     _check_output(dst, args.force, src)
-    if args.gap_report:
-        if args.method != "auto":
-            raise GapFillError("--gap-report says how auto filled each gap: use --method auto")
-        if Path(args.gap_report).suffix.lower() not in (".csv", ".json"):
-            raise GapFillError(f"--gap-report {args.gap_report}: name a .csv or .json file")
-        _check_output(Path(args.gap_report), args.force, src)
     motion = _read(src, args)
     write_motion(motion, dst, overwrite=args.force)
     print(f"wrote {dst} ({motion.n_frames} frames, {motion.n_points} points)")
