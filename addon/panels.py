@@ -16,10 +16,13 @@ class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         icons = {"MISSING": "ERROR", "SUSPECT": "QUESTION", "MARKED": "BOOKMARKS"}
         row = layout.row(align=True)
-        row.label(text=item.point, icon=icons[item.kind])
-        row.label(text=f"{item.first}-{item.last} ({item.last - item.first + 1})")
-        if item.estimate and data.id_data.type != "ARMATURE":
-            row.label(text=f"~{item.estimate:.0f} mm")
+        split = row.split(factor=0.45, align=True)
+        split.label(text=item.point, icon=icons[item.kind])
+        frames = f"{item.first}-{item.last}"
+        if item.estimate and data.id_data.type != "ARMATURE":  # a marker's expected error
+            split.label(text=f"~{item.estimate:.0f}mm {frames}")
+        else:
+            split.label(text=f"{frames} ({item.last - item.first + 1})")
         # filled (an armature's gap where Blender's interpolation was kept: its curve icon)
         row.label(text="", icon="IPO_LINEAR" if item.how == "interp" else
                   "CHECKMARK" if item.filled else "BLANK1")
