@@ -68,15 +68,15 @@ def detect(owner, scene, suspects=True, jump_factor=8.0):
             flagged = bridge.blame_bones(take, flagged)
         suspect = flagged & ~missing
     settings = owner.mocap_gapfill
-    marked = [(g.point, g.first, g.last, g.kind, g.filled, g.how, g.estimate)
+    marked = [(g.point, g.first, g.last, g.kind, g.filled, g.how, g.estimate, g.expected_mm)
               for g in settings.gaps if g.kind == "MARKED"]
     settings.gaps.clear()
     for kind, mask in (("MISSING", missing), ("SUSPECT", suspect)):
         for j, a, b in gap_runs(mask):
             _add_gap(settings, take.points[j], take.first + a, take.first + b, kind)
-    for point, first, last, kind, filled, how, estimate in marked:
+    for point, first, last, kind, filled, how, estimate, expected in marked:
         gap = _add_gap(settings, point, first, last, kind)
-        gap.filled, gap.how, gap.estimate = filled, how, estimate
+        gap.filled, gap.how, gap.estimate, gap.expected_mm = filled, how, estimate, expected
     settings.gap_index = -1 if not len(settings.gaps) else min(settings.gap_index, 0)
     update_stats(owner, take.points, take.first, take.positions.shape[0])
     return take
@@ -297,25 +297,27 @@ def apply_fill(context, plans, results):
                 gap.filled = True
             # how it was filled (rotation fill of an armature, auto on markers; else nothing)
             how = how_filled if plan.take.kind == "armature" else how_carried
-            gap.how, gap.estimate = ("", 0.0) if account is None or not gap.filled else how(
-                account, gap.point, gap.first - plan.take.first, gap.last - plan.take.first)
+            gap.how, gap.estimate, gap.expected_mm = (
+                ("", 0.0, 0.0) if account is None or not gap.filled else
+                how(account, gap.point, gap.first - plan.take.first, gap.last - plan.take.first))
         settings.showing = "RECOVERED"
     return written
 
 
 def how_filled(choices, bone, first, last):
-    """``(how, estimate)`` of a listed gap of ``bone`` over the take's rows ``first``-``last``
+    """``(how, estimate, 0)`` of a listed gap of ``bone`` over the take's rows ``first``-``last``
     from the rotation fill's choices of the gaps it overlaps: the fill (``interp``: Blender's
     interpolation kept; with the share of the way from it where the fill went part of the way)
     and the copies' estimate of its error as a share of the interpolation's (the largest where
-    several, 0 where none judged it)."""
+    several, 0 where none judged it). No error in millimetres: an armature's copies foretell
+    the share, not the level (docs/METHOD_NOTES.md, session 34)."""
     parts = [c for c in choices if c.bone == bone and c.first <= last and c.last >= first]
     if not parts:
-        return "", 0.0
+        return "", 0.0, 0.0
     labels = [c.method if c.share in (0.0, 1.0) else f"{c.method} ({c.share:.0%} of the way)"
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
-    return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0)
+    return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0
 
 
 #: the estimates ``auto`` blends into a marker's gap (:class:`~..core.fill.GapAccount`), in words
@@ -325,21 +327,21 @@ SOURCES = (("rigid", "rigid partners"), ("models", "knowledge base"),
 
 
 def how_carried(accounts, point, first, last):
-    """``(how, estimate)`` of a listed gap of marker ``point`` over the take's rows
+    """``(how, 0, expected_mm)`` of a listed gap of marker ``point`` over the take's rows
     ``first``-``last`` from ``auto``'s accounts of the gaps it overlaps: the estimates it
     blended, by share (those of 5 % or more, largest first; means weighted by the gaps'
     lengths), and the copies' RMS error of the fill in millimetres (the largest where several,
     0 where none had copies)."""
     parts = [a for a in accounts if a.point == point and a.first <= last and a.last >= first]
     if not parts:
-        return "", 0.0
+        return "", 0.0, 0.0
     lengths = [a.last - a.first + 1 for a in parts]
     shares = [(float(np.average([getattr(a, field) for a in parts], weights=lengths)), label)
               for field, label in SOURCES]
     how = ", ".join(f"{label} {share:.0%}" for share, label in sorted(shares, reverse=True)
                     if share >= 0.05)
     judged = [a.estimate for a in parts if np.isfinite(a.estimate)]
-    return how, 1000.0 * max(judged, default=0.0)
+    return how, 0.0, 1000.0 * max(judged, default=0.0)
 
 
 def describe(gap, armature):
@@ -352,4 +354,4 @@ def describe(gap, armature):
         return [f"filled by {gap.how}"] + (
             [f"copies: {gap.estimate:.2f} of the interpolation's error"] if gap.estimate else [])
     return [f"from {gap.how}"] + (
-        [f"copies: about {gap.estimate:.0f} mm RMS error"] if gap.estimate else [])
+        [f"copies: about {gap.expected_mm:.0f} mm RMS error"] if gap.expected_mm else [])

@@ -279,7 +279,7 @@ class MOCAP_GAPFILL_OT_revert_gap(bpy.types.Operator):
         settings = owner.mocap_gapfill
         gap = settings.gaps[settings.gap_index]
         removed = bridge.revert_keys(owner, gap.point, gap.first, gap.last)
-        gap.filled, gap.how, gap.estimate = False, "", 0.0
+        gap.filled, gap.how, gap.estimate, gap.expected_mm = False, "", 0.0, 0.0
         settings.showing = "RECOVERED"
         self.report({"INFO"}, f"{gap.point} {gap.first}-{gap.last}: {removed} recovered keys "
                               "taken out; the original keys either side show there")

@@ -7,11 +7,12 @@ from . import bridge, gaps, prefs
 
 class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
     """Gaps of a take: point, frames, kind; filled gaps carry a check mark (an armature's gap
-    where the interpolation was kept, a curve) and a marker's the copies' estimate of its error"""
+    where the interpolation was kept, a curve) and a marker's what copies of it expect of the
+    error"""
 
     worst_first: bpy.props.BoolProperty(
-        name="Worst First", description="Order the gaps by the copies' estimate of the fill's "
-        "error, largest first, to review those first")
+        name="Worst First", description="Order marker gaps by what copies of them expect of "
+        "the fill's error, largest first, to review those first")
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         icons = {"MISSING": "ERROR", "SUSPECT": "QUESTION", "MARKED": "BOOKMARKS"}
@@ -19,8 +20,8 @@ class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
         split = row.split(factor=0.45, align=True)
         split.label(text=item.point, icon=icons[item.kind])
         frames = f"{item.first}-{item.last}"
-        if item.estimate and data.id_data.type != "ARMATURE":  # a marker's expected error
-            split.label(text=f"~{item.estimate:.0f}mm {frames}")
+        if item.expected_mm:  # what copies of a marker's gap expect of the fill's error
+            split.label(text=f"~{item.expected_mm:.0f}mm {frames}")
         else:
             split.label(text=f"{frames} ({item.last - item.first + 1})")
         # filled (an armature's gap where Blender's interpolation was kept: its curve icon)
@@ -41,7 +42,7 @@ class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
         order = []
         if self.worst_first:
             order = bpy.types.UI_UL_list.sort_items_helper(
-                [(i, g.estimate) for i, g in enumerate(items)], key=lambda item: -item[1])
+                [(i, g.expected_mm) for i, g in enumerate(items)], key=lambda item: -item[1])
         return flags, order
 
 

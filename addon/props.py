@@ -62,9 +62,12 @@ class MOCAP_GAPFILL_PG_gap(bpy.types.PropertyGroup):
                         "the fill it took (interp where Blender's interpolation was kept); a "
                         "marker's, the estimates blended into it and their shares")
     estimate: FloatProperty(name="Estimate", min=0.0, description=(
-        "The fill's RMS error on copies of the gap (the same point and length, where it is "
-        "keyed): an armature's as a share of Blender's interpolation's, a marker's in "
-        "millimetres; 0 where no copies judged it"))
+        "An armature's gap: the fill's RMS error on copies of the gap (the same bone and "
+        "length, where it is keyed) as a share of Blender's interpolation's; 0 where no copies "
+        "judged it"))
+    expected_mm: FloatProperty(name="Expected error", min=0.0, description=(
+        "A marker's gap: what copies of it (the same marker and length, where it is seen) "
+        "expect of the fill's RMS error, in millimetres; 0 where no copies judged it"))
 
 
 class MOCAP_GAPFILL_PG_point(bpy.types.PropertyGroup):

@@ -84,7 +84,7 @@ def test_a_second_marker_set_of_the_same_labels_says_how_its_gaps_were_filled(sc
     assert bpy.ops.mocap_gapfill.fill_gaps(scope="ALL") == {"FINISHED"}
     (gap,) = root.mocap_gapfill.gaps
     assert (gap.point, gap.filled) == ("LELB.001", True)
-    assert gap.how.startswith("rigid partners") and gap.estimate > 0
+    assert gap.how.startswith("rigid partners") and gap.expected_mm > 0
 
 
 def test_c3d_markers_detect_fill_preview(scene, data_dir, marker_kb):
@@ -134,9 +134,9 @@ def test_c3d_markers_detect_fill_preview(scene, data_dir, marker_kb):
         realised[gap.point] = rmse_mm(take.positions[rows, j], truth.positions[rows, j])
         print(f"{gap.point} {gap.first}-{gap.last}: {'; '.join(gaps.describe(gap, False))} "
               f"(realised {realised[gap.point]:.1f} mm)")
-        assert gap.how.startswith("rigid partners") and 0.25 < gap.estimate / realised[
+        assert gap.how.startswith("rigid partners") and 0.25 < gap.expected_mm / realised[
             gap.point] < 4
-    worst = sorted(root.mocap_gapfill.gaps, key=lambda g: -g.estimate)
+    worst = sorted(root.mocap_gapfill.gaps, key=lambda g: -g.expected_mm)
     assert [g.point for g in worst[:2]] == sorted(realised, key=realised.get)[:-3:-1]
 
     # filled keys are typed GENERATED; the original actions are untouched
@@ -311,9 +311,13 @@ def test_bvh_armature_fill_beats_blender_interpolation(daz_armature, daz_kb, dat
         joints = below[rig.names.index(gap.point)]
         moved = np.abs(after.positions[rows][:, joints]
                        - broken.positions[rows][:, joints]).max() * m > 1e-4
-        print(f"{gap.point}: {gap.how} (copies: {gap.estimate:.2f} of the interpolation)")
+        fill_mm = 1000 * m * np.sqrt(np.mean(np.sum((after.positions[rows][:, joints]
+                                                      - truth.positions[rows][:, joints]) ** 2,
+                                                     axis=-1)))
+        print(f"{gap.point}: {'; '.join(gaps.describe(gap, True))} (came out {fill_mm:.1f} mm)")
         assert gap.how and moved == (gap.how != "interp"), (gap.point, gap.how)
         assert gap.estimate < 1.0 and (gap.estimate > 0 or gap.how == "interp")
+        assert gap.expected_mm == 0  # an armature's copies foretell the share, not the level
 
     # keyed channels bit for bit: every key of the recovered action off the gaps is the original
     for curve in compat.fcurves(arm):
