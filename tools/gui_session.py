@@ -186,7 +186,7 @@ def step():
     root = bpy.data.objects["01_01"]
     say("01_01 filled:", sum(g.filled for g in root.mocap_gapfill.gaps), "of",
         len(root.mocap_gapfill.gaps), "gaps; showing", root.mocap_gapfill.showing)
-    say("01_01 how filled:", [(g.point, g.first, g.how, round(g.estimate, 1))
+    say("01_01 how filled:", [(g.point, g.first, g.how, round(g.expected_mm, 1))
                               for g in root.mocap_gapfill.gaps][:8])
     if state["step"] == 5:
         gap = next(g for g in root.mocap_gapfill.gaps if g.point.split(".")[0] == "RBAC")
