@@ -157,10 +157,10 @@ def _real_markers(outdir, scores, report):
         f"{m} {scores[(REAL_MARKERS, m)]:.1f} mm" for m in (DEFAULT_METHOD, "rigid", "linear")))
     # what a technician reviews first: the gaps whose copies expect the largest error
     error = np.linalg.norm(filled.positions - truth.positions, axis=2)
+    came_out = {a: 1000 * np.sqrt(np.mean(error[a.first:a.last + 1, truth.names.index(a.point)]
+                                           ** 2)) for a in worst_first(accounts)[:3]}
     report("  gaps to review first, by what copies of them expect (came out): " + ", ".join(
-        f"{a.summary()} "
-        f"({1000 * np.sqrt(np.mean(error[a.first:a.last + 1, truth.names.index(a.point)] ** 2)):.0f})"
-        for a in worst_first(accounts)[:3]))
+        f"{a.summary()} ({mm:.0f})" for a, mm in came_out.items()))
 
 
 def bone_scores(rig, channels, location, gaps, fps, kb, methods):

@@ -88,8 +88,9 @@ class GapAccount:
     the body), ``spline`` (a spline through the take, short gaps). Where an estimate has no value
     at some frame (no rigid donors there) the others fill it alone. ``estimate``: the fill's RMS
     error in metres on copies of the point's gaps (the point hidden where it is observed,
-    refilled as the gaps were): what ``auto`` expects here, not a measurement of the gap; NaN
-    where the point had no copies."""
+    refilled as the gaps were), its rigid part scaled to how far the rigid donors spread over
+    this gap (:func:`_harder_for_partners`): what ``auto`` expects here, not a measurement of
+    the gap; NaN where the point had no copies."""
 
     point: str
     first: int
@@ -161,7 +162,8 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
                           filled=out.filled & ~kept if out.filled is not None else None)
     if accounts is not None:
         index = {name: p for p, name in enumerate(motion.names)}
-        accounts = [a for a in accounts if not out.missing[a.first:a.last + 1, index[a.point]].all()]
+        accounts = [a for a in accounts
+                    if not out.missing[a.first:a.last + 1, index[a.point]].all()]
     return (out, accounts) if return_account else out
 
 
