@@ -395,16 +395,25 @@ def _harder_for_partners(missing, probe, spread, copies_spread, weight):
     foretell), the knowledge base's share as it is. Where either spread is unknown, 1. On the
     CMU marker tuning takes this ranked each take's gaps closer to how they came out (Spearman
     0.50-0.52 -> 0.56-0.60; docs/METHOD_NOTES.md, session 34)."""
-    with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # points without spread: nan
-        on_copies = (np.nanmean(np.where(probe, copies_spread ** 2, np.nan), axis=0)
-                     if copies_spread is not None else np.full(missing.shape[1], np.nan))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if copies_spread is None:
+            on_copies = np.full(missing.shape[1], np.nan)
+        else:
+            at_copies = np.where(probe, copies_spread ** 2, np.nan)
+            on_copies = np.nansum(at_copies, axis=0) / np.sum(np.isfinite(at_copies), axis=0)
+    # running sums over frames of the gaps' squared spread and of the frames that have one
+    squared = spread ** 2
+    known = np.isfinite(squared)
+    sums = np.vstack([np.zeros((1, missing.shape[1])), np.cumsum(np.where(known, squared, 0),
+                                                                 axis=0)])
+    counts = np.vstack([np.zeros((1, missing.shape[1])), np.cumsum(known, axis=0)])
 
     def harder(p, a, b):
-        with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            ratio = np.nanmean(spread[a:b + 1, p] ** 2) / on_copies[p]
-        if not np.isfinite(ratio) or ratio <= 0:
+        frames = counts[b + 1, p] - counts[a, p]
+        if not frames or not on_copies[p] > 0:
+            return 1.0
+        ratio = (sums[b + 1, p] - sums[a, p]) / frames / on_copies[p]
+        if not ratio > 0:
             return 1.0
         return (1 - weight[p]) * ratio + weight[p]
 
