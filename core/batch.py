@@ -32,6 +32,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+from .. import THREAD_VARIABLES
 from .errors import GapFillError
 from .io import atomic_output, file_suffix
 
@@ -379,9 +380,8 @@ def _threads_per_job(jobs):
     """While workers start, BLAS / OpenMP threads per worker (they inherit the environment):
     ``OMP_NUM_THREADS`` where set, else each worker its share of the cores."""
     threads = os.environ.get("OMP_NUM_THREADS") or str(max(1, (os.cpu_count() or 1) // jobs))
-    names = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-    before = {name: os.environ.get(name) for name in names}
-    os.environ.update({name: threads for name in names})
+    before = {name: os.environ.get(name) for name in THREAD_VARIABLES}
+    os.environ.update({name: threads for name in THREAD_VARIABLES})
     try:
         yield
     finally:

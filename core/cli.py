@@ -179,9 +179,10 @@ def cmd_fill(args):
     left = int(out.missing.sum())
     print(f"wrote {dst}: filled {n_filled} samples with {args.method}"
           + (f", {left} left missing" if left else ""))
-    if accounts and worst_first(accounts):
+    worst = worst_first(accounts or [])[:3]
+    if worst:
         print("review first (what copies of the gaps expect of the error): "
-              + ", ".join(a.summary() for a in worst_first(accounts)[:3]))
+              + ", ".join(a.summary() for a in worst))
     if args.gap_report:
         _write_gap_report(accounts, Path(args.gap_report))
         print(f"wrote {args.gap_report}: {len(accounts)} gaps, worst first")
