@@ -307,14 +307,19 @@ def apply_fill(context, plans, results):
 def how_filled(choices, bone, first, last):
     """``(how, estimate, 0)`` of a listed gap of ``bone`` over the take's rows ``first``-``last``
     from the rotation fill's choices of the gaps it overlaps: the fill (``interp``: Blender's
-    interpolation kept; with the share of the way from it where the fill went part of the way)
+    interpolation kept; with the share of the way from it where the fill went part of the way,
+    and how far on towards the knowledge base's motion and the take's own regression)
     and the copies' estimate of its error as a share of the interpolation's (the largest where
     several, 0 where none judged it). No error in millimetres: an armature's copies foretell
     the share, not the level (docs/METHOD_NOTES.md, session 34)."""
+    from ..core.bonefill import CONSENSUS_FILLS
+
     parts = [c for c in choices if c.bone == bone and c.first <= last and c.last >= first]
     if not parts:
         return "", 0.0, 0.0
-    labels = [c.method if c.share in (0.0, 1.0) else f"{c.method} ({c.share:.0%} of the way)"
+    towards = " + ".join(CONSENSUS_FILLS)
+    labels = [(c.method if c.share in (0.0, 1.0) else f"{c.method} ({c.share:.0%} of the way)")
+              + (f", then {c.consensus:.0%} to {towards}" if c.consensus else "")
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0

@@ -37,12 +37,14 @@ frames:
   ``regress`` on the pose alone and ``regress`` with a Gaussian kernel beside; in equal parts
   in a take too short for copies, where other bones' gaps overlap the gap), and so do gaps of
   ``FEW_COPIES`` seconds or more that fewer than ``AUTO_COPIES`` copies of their own fit
-  beside; the shorter gaps go from ``interp`` towards their fill only as far as the fills
-  agree on the gap; in a take too short for copies, a long gap keeps ``interp`` where it and
-  ``regress`` agree far more closely than either does with ``match``; with a knowledge base
-  of positions only, ``knn``, ``half`` (half-way from ``interp`` to ``knn``) and ``recall`` (subtrees
-  carried onto the knowledge base's guess from the known joints alone: a KB that holds the
-  motion) stand in;
+  beside; every gap of ``LONG_STACK`` seconds or more that does not keep ``interp`` then goes
+  halfway on to the mean of ``match`` and ``regress_kernel`` (``CONSENSUS``: three estimates
+  from different evidence, averaged); the shorter gaps go from ``interp`` towards their fill
+  only as far as the fills agree on the gap; in a take too short for copies, a long gap keeps
+  ``interp`` where it and ``regress`` agree far more closely than either does with ``match``;
+  with a knowledge base of positions only, ``knn``, ``half`` (half-way from ``interp`` to
+  ``knn``) and ``recall`` (subtrees carried onto the knowledge base's guess from the known
+  joints alone: a KB that holds the motion) stand in;
 - ``slerp``: quaternion slerp between the rotations at the keys either side;
 - ``positions``: the position-space fill of every joint below a gap, then each gapped bone turned
   to its children's filled joints (what the add-on did before; kept for comparison).
@@ -93,6 +95,12 @@ STACK_RIDGE = 0.3
 #: (tuned, docs/METHOD_NOTES.md)
 LONG_STACK = 0.75
 LONG_STACK_FILLS = STACK_FILLS + ("regress_pose", "regress_kernel")
+#: a gap of :data:`LONG_STACK` seconds or more that does not keep the interpolation goes this
+#: share of the way from its fill to the mean of :data:`CONSENSUS_FILLS`: the knowledge base's
+#: motion and the take's own regression, estimates that owe each other and the copies' choice
+#: little (chosen on non-test takes, docs/METHOD_NOTES.md, session 35)
+CONSENSUS = 0.5
+CONSENSUS_FILLS = ("match", "regress_kernel")
 #: where the take has copies, every gap shorter than :data:`LONG_STACK` goes from ``interp``
 #: towards the chosen fill only as far as the stacked fills agree on the gap
 #: (:meth:`_Job._doubted`): the weight of their spread against the departure from ``interp``
@@ -161,7 +169,8 @@ class GapChoice:
     copies chose) on copies of the gap - the same bone and length, placed where the bone is
     keyed - as a share of the interpolation's there (their geometric mean, drawn towards the
     take's mean over all copies as ``auto`` scores them); NaN where no copies judged the
-    gap."""
+    gap; ``consensus``: how far the fill then went on towards the mean of
+    :data:`CONSENSUS_FILLS` (0: not at all)."""
 
     bone: str
     first: int
@@ -169,6 +178,7 @@ class GapChoice:
     method: str
     share: float
     estimate: float = float("nan")
+    consensus: float = 0.0
 
 
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
@@ -246,8 +256,10 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     runs = gap_runs(gaps)  # auto's choices are per gap; every other method takes its own
     choices = job.choices or [(method, 0.0 if method == "interp" else 1.0)] * len(runs)
     estimates = job.estimates or [float("nan")] * len(runs)
-    return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate))
-                   for (b, a, e), (name, share), estimate in zip(runs, choices, estimates)]
+    consensus = job.consensus or [0.0] * len(runs)
+    return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate), towards)
+                   for (b, a, e), (name, share), estimate, towards
+                   in zip(runs, choices, estimates, consensus)]
 
 
 class _Job:
@@ -264,7 +276,7 @@ class _Job:
         # a moving bone places its own head (heads rigs; a tails rig's root joint is its head)
         self.own = moves & (rig.roots if rig.lengths is not None else True)
         # auto's choice per gap and its estimate of it from the copies (None: not auto)
-        self.choices = self.estimates = None
+        self.choices = self.estimates = self.consensus = None
 
     def moved_by(self, b):
         """(joints,) bool: the joints bone ``b`` moves (below it, and its own where it moves)."""
@@ -517,7 +529,10 @@ class _Job:
         of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all), but
         ``stack_long`` in equal parts on gaps of :data:`LONG_STACK` seconds or more
         that gaps of other bones overlap (``match`` sees less of the body there), and
-        interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`)."""
+        interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`). Last,
+        each gap of :data:`LONG_STACK` seconds or more (where ``stack_long`` is made) that
+        does not keep the interpolation goes :data:`CONSENSUS` of the way on from its fill to
+        the mean of :data:`CONSENSUS_FILLS`."""
         rotations = self.kb.turns is not None
         if not rotations:
             self.report("auto: the knowledge base holds no bone rotations (built from markers "
@@ -604,10 +619,18 @@ class _Job:
         if not wanted.any():
             return seen
         out = seen.copy()
-        for (b, a, e), (name, share) in zip(runs, choice):
-            if name != "interp":
-                out[a:e + 1, b] = halfway(seen[a:e + 1, b:b + 1], made[name][a:e + 1, b:b + 1],
-                                          np.ones((e - a + 1, 1), bool), share)[:, 0]
+        agree = CONSENSUS if set(CONSENSUS_FILLS) <= set(made) else 0.0
+        self.consensus = [agree if last and name != "interp" else 0.0
+                          for (name, _), last in zip(choice, longest)]
+        for (b, a, e), (name, share), towards in zip(runs, choice, self.consensus):
+            if name == "interp":
+                continue
+            span, rows = np.ones((e - a + 1, 1), bool), slice(a, e + 1)
+            fill = halfway(seen[rows, b:b + 1], made[name][rows, b:b + 1], span, share)
+            if towards:
+                first, second = (made[key][rows, b:b + 1] for key in CONSENSUS_FILLS)
+                fill = halfway(fill, halfway(first, second, span), span, towards)
+            out[rows, b] = fill[:, 0]
         return out
 
     def _outvoted(self, channels, location, wanted, seen, made, runs, choice):
