@@ -306,7 +306,7 @@ def test_demo_is_the_main_job(tmp_path):
                               r.stdout))
     assert set(blender) == {"Walker", "WalkerMarkers"}
     assert float(blender["Walker"]) < bones["interp"] / 5
-    # the add-on's fill is the core's (5.8 mm in Blender, 5.6 in numpy)
+    # the add-on's fill is the core's (4.1 mm in Blender, 4.0 in numpy)
     assert float(blender["Walker"]) <= 1.1 * bones["auto"] + 1.0
     assert float(blender["WalkerMarkers"]) < markers["linear"] / 5
     # the real CMU takes as Blender scenes (01_01's empties, 03_02 through Blender's BVH
@@ -321,10 +321,13 @@ def test_demo_is_the_main_job(tmp_path):
     assert set(real_bones) == {"lForeArm", "rShin", "chest"}, r.stdout
     # and how each was filled: where the interpolation was kept, nothing changed
     how = {bone: by for bone, _, by, _ in found}
-    assert all(by == "interp" or by.split()[0] in ("match", "mix", "stack", "stack_long")
+    assert all(by == "interp" or re.match(r"\w+", by)[0] in ("match", "mix", "stack", "stack_long")
                for by in how.values()), how
+    # the forearm's gap (0.83 s) went on halfway to the long-gap consensus
+    assert how["lForeArm"].endswith("then 50% to match + regress_kernel"), how
     assert all(real_bones[b][0] == real_bones[b][1] for b, by in how.items() if by == "interp")
-    # measured 103.7 / 87.5 / 7.2 vs 128.2 / 86.0 / 7.2 mm (rShin 2 % worse)
+    # measured 111.9 / 87.5 / 7.2 vs 128.2 / 86.0 / 7.2 mm (rShin 2 % worse; before the
+    # consensus the forearm came out at 103.7)
     assert all(fill <= 1.1 * interp + 2.0 for fill, interp in real_bones.values())
     frames = {"lForeArm": 100, "rShin": 90, "chest": 60}
     assert (sum(f * real_bones[b][0] ** 2 for b, f in frames.items())
