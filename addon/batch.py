@@ -14,6 +14,7 @@ from pathlib import Path
 
 import bpy
 
+from ..core.batch import REVIEW_FIRST
 from ..core.errors import GapFillError
 from ..core.fill import NEEDS_KB
 from . import gaps
@@ -38,7 +39,9 @@ def output_path(source, output, overwrite):
 
 def run(args, report=print):
     """Detect and fill the gaps of the open file's takes and save; returns what it did:
-    ``output``, ``gaps``, ``longest_gap`` (frames) and ``samples_filled``."""
+    ``output``, ``gaps``, ``longest_gap`` (frames), ``samples_filled``, and for marker gaps
+    filled by ``auto`` the largest error their copies expect (``expected_mm``) and the gaps to
+    review first (``review_first``: ``object: marker first-last ~N mm``, scene frames)."""
     context = bpy.context
     scene = context.scene
     out = output_path(bpy.data.filepath, args.output, args.overwrite)
@@ -73,8 +76,13 @@ def run(args, report=print):
         report(f"filled {written} samples")
     bpy.ops.wm.save_as_mainfile(filepath=str(out), copy=True)
     report(f"saved {out}")
+    worst = sorted(((g.expected_mm, owner.name, g.point, g.first, g.last) for owner in owners
+                    for g in owner.mocap_gapfill.gaps if g.expected_mm > 0), reverse=True)
+    worst = worst[:REVIEW_FIRST]
     return {"output": str(out), "gaps": len(found), "longest_gap": max(found, default=0),
-            "samples_filled": written}
+            "samples_filled": written, "expected_mm": round(worst[0][0], 1) if worst else "",
+            "review_first": "; ".join(f"{name}: {point} {first}-{last} ~{mm:.0f} mm"
+                                      for mm, name, point, first, last in worst)}
 
 
 def cli_command(argv):

@@ -42,8 +42,8 @@ FORMATS = ("same", "c3d", "npz", "csv")
 MANIFEST = "manifest.jsonl"
 REPORT_FIELDS = ("input", "output", "status", "gaps", "samples_filled", "longest_gap",
                  "expected_mm", "review_first", "method", "seconds", "peak_mb", "error")
-#: gaps a take's row names to review first (``auto`` on a motion file: the largest errors its
-#: copies expect, :func:`~.fill.worst_first`)
+#: gaps a take's row names to review first (``auto`` on a motion file or a .blend file's marker
+#: sets: the largest errors their copies expect, :func:`~.fill.worst_first`)
 REVIEW_FIRST = 3
 
 
@@ -205,7 +205,8 @@ def _blend_take(source, output, options):
             result = json.loads(stats.read_text())
         finally:
             stats.unlink(missing_ok=True)
-    return {k: result[k] for k in ("gaps", "longest_gap", "samples_filled")}
+    return {k: result[k] for k in ("gaps", "longest_gap", "samples_filled", "expected_mm",
+                                   "review_first")}
 
 
 def _engine_local(tasks, jobs, address, done):

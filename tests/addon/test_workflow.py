@@ -87,6 +87,33 @@ def test_a_second_marker_set_of_the_same_labels_says_how_its_gaps_were_filled(sc
     assert gap.how.startswith("rigid partners") and gap.expected_mm > 0
 
 
+def test_blend_run_names_the_marker_gaps_to_review_first(scene, data_dir, marker_kb, tmp_path):
+    """What ``blend`` / ``blender -b -c mocap_gapfill`` hands the batch report for a marker
+    scene: the largest error the gaps' copies expect and the gaps to review first."""
+    import argparse
+    import importlib
+
+    bpy = pytest.importorskip("bpy")
+    batch = importlib.import_module(f"{LOCAL_MODULE}.addon.batch")
+    commands = importlib.import_module(f"{LOCAL_MODULE}.addon.commands")
+    assert bpy.ops.mocap_gapfill.import_markers(
+        filepath=str(data_dir / "cmu/c3d/85_02.c3d")) == {"FINISHED"}
+    root = bpy.context.active_object
+    for name, first, last in MARKER_GAPS[:2]:
+        delete_keys(bpy.data.objects[name], first, last)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "take.blend"))
+    parser = argparse.ArgumentParser()
+    commands.add_arguments(parser)
+    done = batch.run(parser.parse_args(["--kb", str(marker_kb), "--no-suspects"]),
+                     report=lambda line: None)
+    listed = sorted(root.mocap_gapfill.gaps, key=lambda g: -g.expected_mm)
+    assert [g.point for g in listed] == ["RKNE", "LELB"] and listed[-1].expected_mm > 0
+    assert done["gaps"] == 2 and done["expected_mm"] == round(listed[0].expected_mm, 1)
+    assert done["review_first"] == "; ".join(f"{root.name}: {g.point} {g.first}-{g.last} "
+                                             f"~{g.expected_mm:.0f} mm" for g in listed)
+    assert (tmp_path / "take_filled.blend").is_file()
+
+
 def test_c3d_markers_detect_fill_preview(scene, data_dir, marker_kb):
     from mocap_gapfill.core.fill import fill
     from mocap_gapfill.core.io import read_motion
