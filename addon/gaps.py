@@ -355,8 +355,9 @@ def describe(gap, armature):
         return []
     if armature and gap.how == "interp":
         return ["Blender's interpolation kept", "(no fill was judged better there)"]
-    if armature:
-        return [f"filled by {gap.how}"] + (
+    if armature:  # the long-gap consensus on a line of its own (the panel is narrow)
+        first, *then = gap.how.split(", then ")
+        return [f"filled by {first}"] + [f"then {line}" for line in then] + (
             [f"copies: {gap.estimate:.2f} of the interpolation's error"] if gap.estimate else [])
     return [f"from {gap.how}"] + (
         [f"copies: about {gap.expected_mm:.0f} mm RMS error"] if gap.expected_mm else [])
