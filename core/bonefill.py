@@ -275,7 +275,8 @@ class _Job:
         self._kb_features = None  # the knowledge base's rotations as match's features
         # a moving bone places its own head (heads rigs; a tails rig's root joint is its head)
         self.own = moves & (rig.roots if rig.lengths is not None else True)
-        # auto's choice per gap and its estimate of it from the copies (None: not auto)
+        # auto's choice per gap, its estimate of it from the copies and how far the gap then
+        # went on to the long-gap consensus (None: not auto)
         self.choices = self.estimates = self.consensus = None
 
     def moved_by(self, b):
@@ -607,21 +608,24 @@ class _Job:
                                                    lambda b, a: long_table)
             if rotations and not copies:
                 choice = self._outvoted(channels, location, wanted, seen, made, runs, choice)
+        agree = CONSENSUS if wanted.any() and set(CONSENSUS_FILLS) <= set(made) else 0.0
         self.choices, self.estimates = choice, estimates
+        self.consensus = [agree if last and name != "interp" else 0.0
+                          for (name, _), last in zip(choice, longest)]
         counts, partly = {}, {}
         for name, share in choice:
             counts[name] = counts.get(name, 0) + 1
             partly[name] = partly.get(name, 0) + (0 < share < 1)
+        together = np.count_nonzero(self.consensus)
         self.report("auto: " + ", ".join(
             f"{name} on {n} of {len(runs)} gaps"
             + (f" ({partly[name]} part of the way from the interpolation)" if partly[name] else "")
-            for name, n in counts.items()))
+            for name, n in counts.items())
+            + (f"; then {together} long gaps {agree:.0%} of the way on to "
+               f"{' + '.join(CONSENSUS_FILLS)}" if together else ""))
         if not wanted.any():
             return seen
         out = seen.copy()
-        agree = CONSENSUS if set(CONSENSUS_FILLS) <= set(made) else 0.0
-        self.consensus = [agree if last and name != "interp" else 0.0
-                          for (name, _), last in zip(choice, longest)]
         for (b, a, e), (name, share), towards in zip(runs, choice, self.consensus):
             if name == "interp":
                 continue
