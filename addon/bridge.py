@@ -162,7 +162,12 @@ class Take:
 
 
 def scene_fps(scene):
-    return scene.render.fps / scene.render.fps_base
+    """The scene's frame rate; within a millionth of a whole rate, that rate (Blender's BVH
+    importer sets 120.000048 from a frame time of 0.00833333, which the command line reads as
+    120: a 90-frame gap is then 0.75 s in both). NTSC rates (30 / 1.001) stay as they are."""
+    fps = scene.render.fps / scene.render.fps_base
+    nearest = round(fps)
+    return float(nearest) if nearest and abs(fps - nearest) < 1e-6 * nearest else fps
 
 
 def is_marker_set(obj):

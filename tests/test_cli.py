@@ -326,8 +326,8 @@ def test_demo_is_the_main_job(tmp_path):
     # the forearm's gap (0.83 s) went on halfway to the long-gap consensus
     assert how["lForeArm"].endswith("then 50% to match + regress_kernel"), how
     assert all(real_bones[b][0] == real_bones[b][1] for b, by in how.items() if by == "interp")
-    # measured 111.9 / 87.5 / 7.2 vs 128.2 / 86.0 / 7.2 mm (rShin 2 % worse; before the
-    # consensus the forearm came out at 103.7)
+    # measured 116.7 / 74.1 / 6.9 vs 128.2 / 86.0 / 7.2 mm (session 34: 103.7 / 87.5 / 7.2,
+    # before the long-gap consensus and the scene's 120.000048 fps read as 120)
     assert all(fill <= 1.1 * interp + 2.0 for fill, interp in real_bones.values())
     frames = {"lForeArm": 100, "rShin": 90, "chest": 60}
     assert (sum(f * real_bones[b][0] ** 2 for b, f in frames.items())

@@ -245,9 +245,12 @@ def sample_step(state, window, area, wm):
             "action:", arm.animation_data.action.name)
         say("how each gap was filled:", [(g.point, g.how, round(g.estimate, 2))
                                           for g in arm.mocap_gapfill.gaps])
-        # the panel says in words how the selected gap was filled
+        # the panel says in words how the selected gap was filled (one that went on to the
+        # long-gap consensus where there is one)
+        listed = list(arm.mocap_gapfill.gaps)
         arm.mocap_gapfill.gap_index = next(
-            (i for i, g in enumerate(arm.mocap_gapfill.gaps) if g.how not in ("", "interp")), 0)
+            (i for i, g in enumerate(listed) if ", then " in g.how),
+            next((i for i, g in enumerate(listed) if g.how not in ("", "interp")), 0))
         frame_object(arm, area, 170)
         state["step"] = 9
         return 1.0
