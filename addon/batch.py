@@ -14,9 +14,8 @@ from pathlib import Path
 
 import bpy
 
-from ..core.batch import REVIEW_FIRST
 from ..core.errors import GapFillError
-from ..core.fill import NEEDS_KB
+from ..core.fill import NEEDS_KB, REVIEW_FIRST
 from . import gaps
 from .commands import add_arguments
 

@@ -42,9 +42,6 @@ FORMATS = ("same", "c3d", "npz", "csv")
 MANIFEST = "manifest.jsonl"
 REPORT_FIELDS = ("input", "output", "status", "gaps", "samples_filled", "longest_gap",
                  "expected_mm", "review_first", "method", "seconds", "peak_mb", "error")
-#: gaps a take's row names to review first (``auto`` on a motion file or a .blend file's marker
-#: sets: the largest errors their copies expect, :func:`~.fill.worst_first`)
-REVIEW_FIRST = 3
 
 
 @dataclass
@@ -162,7 +159,7 @@ def _peak_mb():
 
 
 def _motion_take(source, output, options):
-    from .fill import fill, worst_first
+    from .fill import REVIEW_FIRST, fill, worst_first
     from .io import read_motion, write_motion
     from .models import KnnSettings
 

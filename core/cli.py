@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import GapFillError
 from .backend import DEVICES
-from .fill import BASELINES, DEFAULT_METHOD, METHODS, worst_first
+from .fill import BASELINES, DEFAULT_METHOD, METHODS, REVIEW_FIRST, worst_first
 from .io import READ_FORMATS, WRITE_FORMATS, atomic_output, read_motion, write_motion
 from .motion import UNIT_SCALES
 
@@ -179,7 +179,7 @@ def cmd_fill(args):
     left = int(out.missing.sum())
     print(f"wrote {dst}: filled {n_filled} samples with {args.method}"
           + (f", {left} left missing" if left else ""))
-    worst = worst_first(accounts or [])[:3]
+    worst = worst_first(accounts or [])[:REVIEW_FIRST]
     if worst:
         print("review first (what copies of the gaps expect of the error): "
               + ", ".join(a.summary() for a in worst))
@@ -242,7 +242,7 @@ def cmd_batch(args):
     if judged:
         print("takes to review first (the largest error copies of their gaps expect): "
               + ", ".join(f"{Path(r['input']).name} ({r['review_first'].split('; ')[0]})"
-                          for r in judged[:3]))
+                          for r in judged[:REVIEW_FIRST]))
     return 1 if any(row["status"] == "failed" for row in rows) else 0
 
 

@@ -23,7 +23,7 @@ import numpy as np
 from . import synth
 from .evaluate import (bone_errors, complete_take, kb_without, punch_gaps, rmse_mm, subject_of,
                        with_gaps)
-from .fill import DEFAULT_METHOD, fill, worst_first
+from .fill import DEFAULT_METHOD, REVIEW_FIRST, fill, worst_first
 from .io import read_motion, write_motion
 from .kb import STARTER_DIR, kb_from_motions, motion_turns, starter_kb
 from .motion import gap_runs
@@ -158,7 +158,7 @@ def _real_markers(outdir, scores, report):
     # what a technician reviews first: the gaps whose copies expect the largest error
     error = np.linalg.norm(filled.positions - truth.positions, axis=2)
     came_out = {a: 1000 * np.sqrt(np.mean(error[a.first:a.last + 1, truth.names.index(a.point)]
-                                           ** 2)) for a in worst_first(accounts)[:3]}
+                                           ** 2)) for a in worst_first(accounts)[:REVIEW_FIRST]}
     report("  gaps to review first, by what copies of them expect (came out): " + ", ".join(
         f"{a.summary()} ({mm:.0f})" for a, mm in came_out.items()))
 

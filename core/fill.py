@@ -109,6 +109,11 @@ class GapAccount:
                    "(no copies)"))
 
 
+#: gaps (or takes) named to review first: the largest errors their copies expect
+#: (:func:`worst_first`; ``fill``, ``batch``'s report and command, the demo)
+REVIEW_FIRST = 3
+
+
 def worst_first(accounts):
     """The gaps' accounts that have an estimate, the largest first: the order to review them."""
     return sorted((a for a in accounts if np.isfinite(a.estimate)), key=lambda a: -a.estimate)
