@@ -328,7 +328,7 @@ def how_filled(choices, bone, first, last):
 #: the estimates ``auto`` blends into a marker's gap (:class:`~..core.fill.GapAccount`), in words
 SOURCES = (("rigid", "rigid partners"), ("models", "knowledge base"),
            ("windows", "knowledge base's motion"), ("own", "take's own regression"),
-           ("spline", "spline"))
+           ("spline", "spline"), ("pattern", "partner's pattern"))
 
 
 def how_carried(accounts, point, first, last):

@@ -431,18 +431,22 @@ def _nearest_seen(seen, p, chosen, gap, a, b, far):
 
 
 
-def fill_pattern(pos):
+def fill_pattern(pos, only=None, cache=None):
     """Pattern fill: each gap shaped like its steadiest donor's trajectory (see the module
     docstring): ``F(t) = V_F(t) - V_D(t) + D(t)`` with ``V`` the straight line between a
-    trajectory's values at the gap's ends (the offset at the one end at a clip end)."""
+    trajectory's values at the gap's ends (the offset at the one end at a clip end).
+
+    ``only``: a (frames, points) mask; the gaps that start outside it, and those no donor spans,
+    keep NaN. ``cache``: a dict of each point's donor statistics, kept between calls on the same
+    take (with some samples hidden, say)."""
     pos = np.asarray(pos, dtype=np.float64)
     frames = len(pos)
     seen = np.isfinite(pos[..., 0])
     out = pos.copy()
-    stats = {}
+    stats = {} if cache is None else cache
     for p, a, b in gap_runs(~seen):
         ends = _gap_ends(a, b, frames)
-        if not ends:
+        if not ends or (only is not None and not only[a, p]):
             continue
         if p not in stats:
             stats[p] = _pair_stats(pos, p, seen)[1]
@@ -454,7 +458,7 @@ def fill_pattern(pos):
         weights = _end_weights(a, b, ends)
         offsets = np.stack([pos[t, p] - pos[t, q] for t in ends])  # (ends, 3)
         out[a:b + 1, p] = pos[a:b + 1, q] + weights @ offsets
-    return fill_linear(out)
+    return fill_linear(out) if only is None else out
 
 
 def fill_local_spline(pos, reference):

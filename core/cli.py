@@ -191,7 +191,7 @@ def cmd_fill(args):
 
 #: the columns of ``fill --gap-report`` (shares of auto's estimates, the copies' RMS error)
 GAP_REPORT_FIELDS = ("point", "first_frame", "last_frame", "frames", "expected_mm", "rigid",
-                     "models", "windows", "own", "spline")
+                     "models", "windows", "own", "spline", "pattern")
 
 
 def _write_gap_report(accounts, path):

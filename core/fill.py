@@ -60,6 +60,10 @@ AUTO_SPLINE_SECONDS = 0.2
 AUTO_SPLINE_COPIES = 4
 AUTO_SPLINE_MARGIN = 10
 AUTO_SPLINE_REACH = 4
+#: beside the spline, the pattern fill (the steadiest partner's trajectory, offset to the gap's
+#: ends: it follows a turn inside the gap that the spline cuts) joins short gaps by its inverse
+#: error on the same copies at this weight (docs/METHOD_NOTES.md, sessions 35-36)
+AUTO_PATTERN_WEIGHT = 0.5
 #: longer gaps lean towards the same spline near their ends (:func:`_with_spline_ends`), by a
 #: weight per distance from the nearer end: the least-squares share of the copies' frames at that
 #: distance (shrunk towards none by this ridge), never rising with the distance, none below
@@ -100,6 +104,7 @@ class GapAccount:
     windows: float
     own: float
     spline: float
+    pattern: float = 0.0
     estimate: float = float("nan")
 
     def summary(self):
@@ -237,7 +242,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     point on the rest of the body (:func:`~.regression.regress_points`), by its error on the
     copies. Longer gaps lean towards a spline through the take next to their ends
     (:func:`_with_spline_ends`); short gaps (:data:`AUTO_SPLINE_SECONDS`) are last blended with
-    that spline by its error on copies of each gap (:func:`_with_spline`).
+    that spline and a partner's pattern by their errors on copies of each gap
+    (:func:`_with_spline`).
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
@@ -381,13 +387,15 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     accounts = []
     harder = _harder_for_partners(missing, probe, spread, copies_spread, weight)
     for p, a, b in gap_runs(missing):
-        spline_share, squared = eased.get((p, a), (0.0, per_sample[p] * harder(p, a, b)))
-        kb_share = weight[p] * (1 - spline_share)
+        spline_share, pattern_share, squared = eased.get(
+            (p, a), (0.0, 0.0, per_sample[p] * harder(p, a, b)))
+        rest = 1 - spline_share - pattern_share
+        kb_share = weight[p] * rest
         accounts.append(GapAccount(
-            motion.names[p], a, b, rigid=float((1 - weight[p]) * (1 - spline_share)),
+            motion.names[p], a, b, rigid=float((1 - weight[p]) * rest),
             models=float(kb_share * (1 - windows[p]) * (1 - own[p])),
             windows=float(kb_share * windows[p] * (1 - own[p])), own=float(kb_share * own[p]),
-            spline=float(spline_share),
+            spline=float(spline_share), pattern=float(pattern_share),
             estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
     return _with_fill(motion, out), accounts
 
@@ -517,9 +525,10 @@ def _with_spline_ends(motion, out, copies, probe, spline, rigid_alone, report):
 
 
 def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
-    """``out`` with each gap blended towards a cubic spline of its point through the take
-    (:func:`~.baselines.fill_spline`) by inverse errors per sample: the spline's on up to
-    :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
+    """``out`` with each gap blended with a cubic spline of its point through the take
+    (:func:`~.baselines.fill_spline`) and its pattern fill (:func:`~.baselines.fill_pattern`,
+    at :data:`AUTO_PATTERN_WEIGHT`) by inverse errors per sample: the spline's and the
+    pattern's on up to :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
     frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; not
     finite where it has none) or, where ``rigid_alone`` says the rigid estimate fills the point
     alone, that estimate's (``rigid_of(hidden)``: it on the samples ``hidden`` with those
@@ -528,9 +537,10 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     any estimate carried from other points; over longer gaps its error grows fast, with a tail
     its copies do not foresee, so only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part.
     Gaps at the take's ends (no spline across them) and points without a finite ``e_out`` keep
-    ``out``. Returns the blend and, per gap blended (``(point, first frame)``), the spline's
-    share and the blend's expected squared error (the two errors as if independent)."""
-    from .baselines import fill_spline
+    ``out``; the pattern joins only where a partner spans the gap and each of its copies.
+    Returns the blend and, per gap blended (``(point, first frame)``), the spline's and the
+    pattern's shares and the blend's expected squared error (the errors as if independent)."""
+    from .baselines import fill_pattern, fill_spline
 
     missing = motion.missing
     # copy k of every gap goes into round k: copies of one round never meet, those of one gap
@@ -551,9 +561,21 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
             copies.append((p, a, b, starts))
     if not copies:
         return out, {}
-    error = [np.sum((fill_spline(np.where(hidden[..., None], np.nan, motion.positions))
-                     - motion.positions) ** 2, axis=2) if hidden.any() else None
-             for hidden in rounds]
+    short = np.zeros_like(missing)
+    for p, a, b, _ in copies:
+        short[a:b + 1, p] = True
+    donors = {}  # the pattern's donor statistics of the take, for the gaps and the copies alike
+    pattern = fill_pattern(motion.positions, only=short, cache=donors)
+
+    def squared_error(fill):
+        """Per round of copies, ``fill``'s squared error with the round's samples hidden."""
+        return [np.sum((fill(np.where(hidden[..., None], np.nan, motion.positions), hidden)
+                        - motion.positions) ** 2, axis=2) if hidden.any() else None
+                for hidden in rounds]
+
+    error = squared_error(lambda pos, hidden: fill_spline(pos))
+    pattern_error = squared_error(lambda pos, hidden: fill_pattern(pos, only=hidden,
+                                                                   cache=donors))
     # where the rigid estimate alone fills a point, it is scored on the spline's own copies
     if rigid_alone[[p for p, _, _, _ in copies]].any():
         rigid_error = [np.sum((rigid_of(hidden) - motion.positions) ** 2, axis=2)
@@ -561,18 +583,27 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
                        for hidden in rounds]
     out, shares = out.copy(), {}
     for p, a, b, starts in copies:
-        e_spline = np.mean([error[k][s:s + b - a + 1, p].mean() for k, s in starts])
-        e_here = e_out[p]
+        def on_copies(error):
+            return np.mean([error[k][s:s + b - a + 1, p].mean() for k, s in starts])
+
+        e_spline, e_here, e_pattern = on_copies(error), e_out[p], on_copies(pattern_error)
         if rigid_alone[p]:
-            e_rigid = np.mean([rigid_error[k][s:s + b - a + 1, p].mean() for k, s in starts])
+            e_rigid = on_copies(rigid_error)
             e_here = e_rigid if np.isfinite(e_rigid) else e_here
-        share = e_here / (e_here + e_spline + 1e-24)
-        out[a:b + 1, p] = (1 - share) * out[a:b + 1, p] + share * spline[a:b + 1, p]
-        shares[p, a] = share, (1 - share) ** 2 * e_here + share ** 2 * e_spline
-    eased = sum(share >= 0.5 for share, _ in shares.values())
-    if eased:
-        report(f"auto: a spline through the take carries {eased} of {len(copies)} gaps more "
-               f"than the other estimates")
+        if not (np.isfinite(e_pattern) and np.isfinite(pattern[a:b + 1, p]).all()):
+            e_pattern = np.inf  # no donor spans the gap or one of its copies
+        errors = np.array([e_here, e_spline, e_pattern])
+        w = np.array([1.0, 1.0, AUTO_PATTERN_WEIGHT]) / (errors + 1e-24)
+        w /= w.sum()
+        out[a:b + 1, p] = w[0] * out[a:b + 1, p] + w[1] * spline[a:b + 1, p] + \
+            (w[2] * pattern[a:b + 1, p] if w[2] else 0.0)
+        shares[p, a] = w[1], w[2], float(np.sum(w[w > 0] ** 2 * errors[w > 0]))
+    eased = sum(spline_share >= 0.5 for spline_share, _, _ in shares.values())
+    patterned = sum(pattern_share >= 0.25 for _, pattern_share, _ in shares.values())
+    if eased or patterned:
+        report(f"auto: of {len(copies)} short gaps a spline through the take carries {eased} "
+               f"more than the other estimates, a partner's pattern a quarter or more of "
+               f"{patterned}")
     return out, shares
 
 

@@ -119,6 +119,13 @@ def test_pattern_fill_follows_the_donor_and_meets_both_gap_ends():
     out = baselines.fill_pattern(gappy)
     np.testing.assert_allclose(out[100:180, 0], pos[100:180, 0], atol=1e-12)
     np.testing.assert_allclose(out[260:, 0], donor[260:] + pos[259, 0] - donor[259], atol=1e-12)
+    # the gaps that start in ``only`` alone, the same as in the whole fill; the others keep NaN
+    only = np.zeros(gappy.shape[:2], bool)
+    only[100, 0] = True
+    cache = {}
+    part = baselines.fill_pattern(gappy, only=only, cache=cache)
+    np.testing.assert_array_equal(part[100:180, 0], out[100:180, 0])
+    assert np.isnan(part[260:, 0]).all() and list(cache) == [0]
 
 
 def test_local_spline_is_exact_for_a_body_that_only_walks_and_turns():

@@ -125,7 +125,7 @@ def test_fill_reports_each_gap_worst_first(data_dir, tmp_path):
     expected = [float(row["expected_mm"]) for row in rows]
     assert expected == sorted(expected, reverse=True) and expected[-1] > 0
     for row in rows:
-        shares = [float(row[k]) for k in ("rigid", "models", "windows", "own", "spline")]
+        shares = [float(row[k]) for k in ("rigid", "models", "windows", "own", "spline", "pattern")]
         first, last = int(row["first_frame"]), int(row["last_frame"])
         assert abs(sum(shares) - 1) < 1e-3 and int(row["frames"]) == last - first + 1
         assert miss[first - 1:last, take.names.index(row["point"])].all()
