@@ -251,12 +251,13 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
 
     from .baselines import rigid_estimates
     from .matching import fill_match
-    from .recover import KnnSettings, fill_knn
+    from .recover import LACKING, KnnSettings, fill_knn
     from .regression import regress_points
 
     report = report or (lambda message: None)
     progress = progress or (lambda fraction, message: None)
     settings = settings or KnnSettings()
+    lacking = match_names(kb, motion.names)[1]
     missing = motion.missing
     probe = validation_gaps(missing, AUTO_PROBES,
                             least=0 if motion.parents is None else AUTO_PROBE_FRAMES)
@@ -352,8 +353,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     # estimate carried on would add its error to the next)
     given = motion.replace(positions=np.where(ahead[..., None], rigid, motion.positions))
     start = 0.5 if probe.any() else 0.0
+    # the points the knowledge base lacks are named below, with what became of them
     knn = fill_knn(given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
-                   should_cancel=should_cancel, report=report).positions
+                   should_cancel=should_cancel,
+                   report=lambda m: m.startswith(LACKING) or report(m)).positions
     if long.any() and (windows > 0).any():
         knn = _mix_in(knn, fill_match(given, kb, windows > 0, should_cancel).positions, windows)
         report(f"auto: windows of the knowledge base's motion join its models on "
@@ -384,6 +387,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
            f"more than the knowledge base"
            + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
               f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
+    if lacking:
+        report(_lacking_line(motion, out, lacking))
     accounts = []
     harder = _harder_for_partners(missing, probe, spread, copies_spread, weight)
     for p, a, b in gap_runs(missing):
@@ -398,6 +403,21 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             spline=float(spline_share), pattern=float(pattern_share),
             estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
     return _with_fill(motion, out), accounts
+
+
+def _lacking_line(motion, out, lacking):
+    """``auto``'s report on the points the knowledge base lacks: which of their gaps the take
+    alone (rigid partners, a spline, a partner's pattern) filled, and which it left."""
+    fates = {"filled from the take alone": [], "partly filled": [], "left unfilled": []}
+    for name in lacking:
+        p = motion.names.index(name)
+        gone = motion.missing[:, p]
+        if gone.any():
+            left = np.isnan(out[gone, p, 0])
+            fates["left unfilled" if left.all() else "partly filled" if left.any()
+                  else "filled from the take alone"].append(name)
+    said = "; ".join(f"{fate}: {', '.join(names)}" for fate, names in fates.items() if names)
+    return "auto: points the knowledge base lacks: " + (said or f"{', '.join(lacking)} (no gaps)")
 
 
 def _harder_for_partners(missing, probe, spread, copies_spread, weight):

@@ -106,11 +106,16 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
     return motion.replace(positions=out, filled=filled)
 
 
+#: how the knowledge-base fill names the points it does not know (``auto`` says what became of
+#: them instead: its other estimates need no knowledge base)
+LACKING = "not in the knowledge base"
+
+
 def _fill_piece(motion, kb, settings, progress, should_cancel, report):
     """:func:`fill_knn` of one piece."""
     common, lacking = match_names(kb, motion.names)
     if lacking:
-        report(f"not in the knowledge base, left unfilled: {', '.join(lacking)}")
+        report(f"{LACKING}, left unfilled: {', '.join(lacking)}")
     reference = kb.reference_for(common)
     q_index = [motion.names.index(n) for n in common]
     pos = motion.positions[:, q_index]
