@@ -87,6 +87,22 @@ def test_a_second_marker_set_of_the_same_labels_says_how_its_gaps_were_filled(sc
     assert gap.how.startswith("rigid partners") and gap.expected_mm > 0
 
 
+def test_a_marker_gap_names_every_estimate_blended_into_it(extension):
+    """The gap list's words for a short dropout blended from rigid partners, a spline and a
+    partner's pattern (``auto``'s accounts of the two gaps it overlaps, by their lengths)."""
+    from mocap_gapfill.core.fill import GapAccount
+
+    _, _, gaps, _ = modules()
+    accounts = [GapAccount("LELB", 10, 12, rigid=0.3, models=0.0, windows=0.0, own=0.0,
+                           spline=0.3, pattern=0.4, estimate=0.002),
+                GapAccount("LELB", 14, 16, rigid=0.5, models=0.02, windows=0.0, own=0.0,
+                           spline=0.38, pattern=0.1, estimate=0.003),
+                GapAccount("RELB", 10, 12, rigid=1.0, models=0.0, windows=0.0, own=0.0,
+                           spline=0.0, pattern=0.0, estimate=0.009)]
+    how, _, expected = gaps.how_carried(accounts, "LELB", 8, 20)
+    assert how == "rigid partners 40%, spline 34%, partner's pattern 25%" and expected == 3.0
+
+
 def test_blend_run_names_the_marker_gaps_to_review_first(scene, data_dir, marker_kb, tmp_path):
     """What ``blend`` / ``blender -b -c mocap_gapfill`` hands the batch report for a marker
     scene: the largest error the gaps' copies expect and the gaps to review first."""
