@@ -548,8 +548,8 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     """``out`` with each gap blended with a cubic spline of its point through the take
     (:func:`~.baselines.fill_spline`) and its pattern fill (:func:`~.baselines.fill_pattern`,
     at :data:`AUTO_PATTERN_WEIGHT`) by inverse errors per sample: the spline's and the
-    pattern's on up to :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
-    frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; not
+    pattern's on up to :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same
+    length, the nearest frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; not
     finite where it has none) or, where ``rigid_alone`` says the rigid estimate fills the point
     alone, that estimate's (``rigid_of(hidden)``: it on the samples ``hidden`` with those
     hidden) on the spline's copies; ``spline`` is that spline of the take. Over a few frames a
