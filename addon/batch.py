@@ -15,7 +15,7 @@ from pathlib import Path
 import bpy
 
 from ..core.errors import GapFillError
-from ..core.fill import NEEDS_KB, REVIEW_FIRST
+from ..core.fill import REVIEW_FIRST, USES_KB
 from . import gaps
 from .commands import add_arguments
 
@@ -45,7 +45,7 @@ def run(args, report=print):
     scene = context.scene
     out = output_path(bpy.data.filepath, args.output, args.overwrite)
     # without --kb, each take gets the starter knowledge base that fits it (gaps.plan_fill)
-    kb = gaps.load_kb_cached(args.kb) if args.kb and args.method in NEEDS_KB else None
+    kb = gaps.load_kb_cached(args.kb) if args.kb and args.method in USES_KB else None
     owners = (gaps.takes_in(context, args.objects) if args.objects else gaps.all_takes(scene))
     if not owners:
         raise GapFillError("no armature or marker set in this file")

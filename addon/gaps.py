@@ -190,7 +190,7 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
     Blender's own interpolation; other methods fill joint positions and solve the bones.
     Without a knowledge base (``kb`` None), methods that need one take the starter knowledge
     base whose names match the take (:func:`~..core.kb.starter_kb`), or say why none fits."""
-    from ..core.fill import NEEDS_KB, fill
+    from ..core.fill import NEEDS_KB, TAKE_ALONE, USES_KB, fill
     from ..core.kb import starter_kb
     from ..core.recover import KnnSettings
 
@@ -215,15 +215,17 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
         if take.kind == "markers":
             write &= missing
         plan = FillPlan(owner.name, take, write, missing, ids, every, kb=kb)
-        if method in NEEDS_KB and kb is None:
+        if method in USES_KB and kb is None:
             try:
                 path, plan.kb = starter_kb(list(take.names))
             except GapFillError as exc:
-                raise GapFillError(f"'{owner.name}': {exc}; or choose a knowledge base (Mocap "
-                                   "tab > Knowledge base), or the Rigid body method for "
-                                   "markers") from None
-            plan.messages.append(f"no knowledge base chosen: the starter {path.name} "
-                                 f"({plan.kb.size} poses of CMU motion)")
+                if method in NEEDS_KB or take.kind == "armature":
+                    raise GapFillError(f"'{owner.name}': {exc}; or choose a knowledge base "
+                                       "(Mocap tab > Knowledge base)") from None
+                plan.messages.append(f"'{owner.name}': {exc}; until then, {TAKE_ALONE}")
+            else:
+                plan.messages.append(f"no knowledge base chosen: the starter {path.name} "
+                                     f"({plan.kb.size} poses of CMU motion)")
         plans.append(plan)
     if not plans:
         raise GapFillError("no gaps to fill: detect or mark gaps first"

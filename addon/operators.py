@@ -7,7 +7,7 @@ from bpy.props import EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
 from ..core.errors import GapFillError
-from ..core.fill import NEEDS_KB
+from ..core.fill import USES_KB
 from . import bridge, compat, gaps, prefs
 from .jobs import JobOperator
 
@@ -314,7 +314,7 @@ class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
         if not owners:
             raise GapFillError("select an armature or a marker set")
         kb = None
-        path = gaps.kb_path(context) if settings.method in NEEDS_KB else ""
+        path = gaps.kb_path(context) if settings.method in USES_KB else ""
         if path:  # none chosen: the starter knowledge base that fits each take
             kb = gaps.load_kb_cached(path)
             prefs.remember_kb(path, context)

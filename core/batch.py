@@ -110,16 +110,21 @@ _KBS = {}
 def _knowledge_base(path, names, method):
     """The knowledge base for a take, loaded once per process: the file given, or the starter
     one that fits the take's names; None for methods that need none."""
-    from .fill import NEEDS_KB
+    from .fill import NEEDS_KB, USES_KB
     from .kb import load_kb, starter_kb
 
-    if method not in NEEDS_KB:
+    if method not in USES_KB:
         return None
     if path:
         if path not in _KBS:
             _KBS[path] = load_kb(path)
         return _KBS[path]
-    starter, kb = starter_kb(names)
+    try:
+        starter, kb = starter_kb(names)
+    except GapFillError:
+        if method in NEEDS_KB:
+            raise
+        return None  # auto fills from the take alone
     return _KBS.setdefault(str(starter), kb)
 
 

@@ -146,7 +146,7 @@ def cmd_kb_build(args):
 
 
 def cmd_fill(args):
-    from .fill import NEEDS_KB, fill
+    from .fill import NEEDS_KB, TAKE_ALONE, USES_KB, fill
     from .kb import load_kb, starter_kb
     from .recover import KnnSettings
 
@@ -160,15 +160,18 @@ def cmd_fill(args):
         _check_output(Path(args.gap_report), args.force, src)
     motion = _read(src, args)
     kb = load_kb(args.kb) if args.kb else None
-    if kb is None and args.method in NEEDS_KB:
+    if kb is None and args.method in USES_KB:
         try:
             path, kb = starter_kb(motion.names)
         except GapFillError as exc:
-            raise GapFillError(f"method {args.method!r} needs a knowledge base: -k KB.npz "
-                               f"(make one with 'mocap-gapfill kb build'); {exc}; without one, "
-                               "--method rigid fills markers from their rigid partners") from None
-        _report(f"no -k given: the starter knowledge base {path.name} ({kb.size} poses of CMU "
-                "motion)")
+            if args.method in NEEDS_KB:
+                raise GapFillError(f"method {args.method!r} needs a knowledge base: -k KB.npz "
+                                   f"(make one with 'mocap-gapfill kb build'); {exc}; without "
+                                   "one, --method auto fills from the take alone") from None
+            _report(f"no -k given: {exc}; until then, {TAKE_ALONE}")
+        else:
+            _report(f"no -k given: the starter knowledge base {path.name} ({kb.size} poses of "
+                    "CMU motion)")
     progress = Progress(args.quiet)
     out, accounts = fill(motion, args.method, kb=kb, progress=progress, report=_report,
                          settings=KnnSettings(k=args.k, device=args.device),

@@ -16,7 +16,13 @@ METHODS = ("knn", "auto", "linear", "spline", "local-spline", "rigid", "pattern"
 DEFAULT_METHOD = "auto"
 #: the methods that are not the project's own (what users already have, and the literature's)
 BASELINES = tuple(m for m in METHODS if m not in ("knn", "auto"))
-NEEDS_KB = ("knn", "auto", "pca")
+#: the methods that use a knowledge base when there is one (the command and the add-on then take
+#: the starter one that fits), and those that cannot fill without one (``auto`` fills from the
+#: take alone: rigid partners, a spline, a partner's pattern)
+USES_KB = ("knn", "auto", "pca")
+NEEDS_KB = ("knn", "pca")
+#: what ``auto`` does where no knowledge base fits, in words
+TAKE_ALONE = "auto fills from the take alone (rigid partners, a spline, a partner's pattern)"
 #: validation gaps (copies of its gaps) per point for ``auto``, and for skeleton joints more where
 #: those hold fewer frames than ``AUTO_PROBE_FRAMES`` (five copies of 3-frame dropouts weigh the
 #: methods on 15 samples; on marker sets rigid partners carry nearly every marker with short
@@ -156,7 +162,7 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
         raise GapFillError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     if method in NEEDS_KB and kb is None:
         raise GapFillError(f"method {method!r} needs a knowledge base (-k KB.npz); without "
-                           "one, 'rigid' fills markers from their rigid partners")
+                           "one, 'auto' fills from the take alone")
     if not motion.missing.any():
         return (motion, [] if method == "auto" else None) if return_account else motion
     accounts = None
@@ -257,13 +263,14 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     report = report or (lambda message: None)
     progress = progress or (lambda fraction, message: None)
     settings = settings or KnnSettings()
-    lacking = match_names(kb, motion.names)[1]
+    # without a knowledge base the take alone fills: rigid partners, a spline, a partner's pattern
+    lacking = list(motion.names) if kb is None else match_names(kb, motion.names)[1]
     missing = motion.missing
     probe = validation_gaps(missing, AUTO_PROBES,
                             least=0 if motion.parents is None else AUTO_PROBE_FRAMES)
     with np.errstate(invalid="ignore"):
         long = (probe.any(axis=0) & (_mean_run(missing) >= AUTO_MATCH_SECONDS * motion.fps)
-                & (motion.parents is not None))
+                & (motion.parents is not None) & (kb is not None))
 
     partners = {}  # the donors' statistics on this take, computed once
     # marker sets reach past the gap ends and let partners carry a marker alone within more
@@ -282,6 +289,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
 
     rigid, spread = carried(motion)
+    nowhere = np.full(motion.positions.shape, np.nan)  # the knowledge base's fill without one
     # the copies are refilled as the gaps will be: where rigid partners carry a point closely
     # through a gap, the knowledge base sees it there (below), so it is seen at the copies too
     hidden = motion.replace(positions=np.where(
@@ -305,9 +313,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                 settings.model_fps or np.inf, AUTO_COPIES_MODEL_FPS),
                 query_noise=AUTO_COPIES_QUERY_NOISE if settings.query_noise == "auto"
                 else settings.query_noise)
-            knn_copies = (fill_knn(hidden, kb, scout, progress=lambda f, m: progress(0.5 * f, m),
-                                   should_cancel=should_cancel).positions
-                          if probe.any() else None)
+            knn_copies = (None if not probe.any() else nowhere if kb is None else
+                          fill_knn(hidden, kb, scout, progress=lambda f, m: progress(0.5 * f, m),
+                                   should_cancel=should_cancel).positions)
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
@@ -354,9 +362,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     given = motion.replace(positions=np.where(ahead[..., None], rigid, motion.positions))
     start = 0.5 if probe.any() else 0.0
     # the points the knowledge base lacks are named below, with what became of them
-    knn = fill_knn(given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
-                   should_cancel=should_cancel,
-                   report=lambda m: m.startswith(LACKING) or report(m)).positions
+    knn = nowhere if kb is None else fill_knn(
+        given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
+        should_cancel=should_cancel, report=lambda m: m.startswith(LACKING) or report(m)).positions
     if long.any() and (windows > 0).any():
         knn = _mix_in(knn, fill_match(given, kb, windows > 0, should_cancel).positions, windows)
         report(f"auto: windows of the knowledge base's motion join its models on "
@@ -388,7 +396,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
            + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
               f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
     if lacking:
-        report(_lacking_line(motion, out, lacking))
+        report(_lacking_line(motion, out, lacking, kb is None))
     accounts = []
     harder = _harder_for_partners(missing, probe, spread, copies_spread, weight)
     for p, a, b in gap_runs(missing):
@@ -405,9 +413,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     return _with_fill(motion, out), accounts
 
 
-def _lacking_line(motion, out, lacking):
-    """``auto``'s report on the points the knowledge base lacks: which of their gaps the take
-    alone (rigid partners, a spline, a partner's pattern) filled, and which it left."""
+def _lacking_line(motion, out, lacking, no_kb):
+    """``auto``'s report on the points the knowledge base lacks (all, without one: ``no_kb``):
+    which of their gaps the take alone (rigid partners, a spline, a partner's pattern) filled,
+    and which it left."""
     fates = {"filled from the take alone": [], "partly filled": [], "left unfilled": []}
     for name in lacking:
         p = motion.names.index(name)
@@ -417,6 +426,8 @@ def _lacking_line(motion, out, lacking):
             fates["left unfilled" if left.all() else "partly filled" if left.any()
                   else "filled from the take alone"].append(name)
     said = "; ".join(f"{fate}: {', '.join(names)}" for fate, names in fates.items() if names)
+    if no_kb:
+        return "auto: no knowledge base: " + (said or "no gaps")
     return "auto: points the knowledge base lacks: " + (said or f"{', '.join(lacking)} (no gaps)")
 
 

@@ -96,12 +96,20 @@ def test_kb_build_then_fill(data_dir, tmp_path):
     assert r.returncode == 0 and "starter knowledge base cmu_markers41_kb.npz" in r.stderr
     r = cli("fill", data_dir / "cmu/asfamc/01/01_01.amc", "-o", tmp_path / "y.npz")
     assert r.returncode == 0 and "starter knowledge base cmu_asf31_kb.npz" in r.stderr
+    # a marker set no starter knowledge base knows: knn cannot fill it; auto fills from the take
     unknown = read_motion(data_dir / "cmu/c3d/85_02.c3d").frame_range(0, 200)
-    unknown = unknown.replace(names=tuple(f"P{i}" for i in range(unknown.n_points)))
+    positions = unknown.positions.copy()
+    positions[50:80, 5] = positions[100:110, 12] = np.nan
+    unknown = unknown.replace(names=tuple(f"P{i}" for i in range(unknown.n_points)),
+                              positions=positions)
     write_motion(unknown, tmp_path / "unknown.npz")
-    r = cli("fill", tmp_path / "unknown.npz", "-o", tmp_path / "z.npz")
+    r = cli("fill", tmp_path / "unknown.npz", "-o", tmp_path / "z.npz", "--method", "knn")
     assert r.returncode == 2 and "needs a knowledge base" in r.stderr
     assert "no starter knowledge base fits this take" in r.stderr and "P0" in r.stderr
+    r = cli("fill", tmp_path / "unknown.npz", "-o", tmp_path / "z.npz")
+    assert r.returncode == 0 and "filled 40 samples with auto" in r.stdout, r.stderr
+    assert "until then, auto fills from the take alone" in r.stderr
+    assert "auto: no knowledge base: filled from the take alone: P5, P12" in r.stderr
 
 
 def test_fill_reports_each_gap_worst_first(data_dir, tmp_path):

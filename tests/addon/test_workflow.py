@@ -228,6 +228,34 @@ def test_a_second_take_of_the_same_markers_fills_with_the_starter_kb(scene, data
     assert not np.isnan(filled.positions[:, filled.points.index(rbac.point)]).any()
 
 
+def test_markers_no_knowledge_base_knows_fill_from_the_take_alone(scene, data_dir):
+    """A studio's own labels, none chosen: no starter knowledge base fits, so `auto` fills from
+    the take alone (rigid partners, spline, pattern) and says so; before, the fill stopped."""
+    bpy = pytest.importorskip("bpy")
+    bridge, _, _, _ = modules()
+    bpy.ops.mocap_gapfill.import_markers(filepath=str(data_dir / "cmu/c3d/85_02.c3d"))
+    root = bpy.context.active_object
+    original = bridge.read_take(root, scene)
+    labels = sorted(c.name for c in root.children)
+    for i, child in enumerate(sorted(root.children, key=lambda c: c.name)):
+        child[bridge.MARKER_LABEL] = child.name = f"M{i:02d}"
+    delete_keys(bpy.data.objects["M07"], 100, 189)
+    truth = bridge.read_take(root, scene)
+    scene.mocap_gapfill.detect_suspects = False
+    assert bpy.ops.mocap_gapfill.detect_gaps() == {"FINISHED"}
+    scene.mocap_gapfill.kb_path = ""
+    assert bpy.ops.mocap_gapfill.fill_gaps(scope="ALL") == {"FINISHED"}
+    (gap,) = root.mocap_gapfill.gaps
+    assert gap.filled and gap.how.startswith("rigid partners")
+    filled = bridge.read_take(root, scene)
+    m07 = filled.points.index("M07")
+    assert np.isnan(truth.positions[99:189, m07]).all()
+    error = rmse_mm(filled.positions[99:189, m07],
+                    original.positions[99:189, original.points.index(labels[7])])
+    print(f"{labels[7]} from its rigid partners: {error:.1f} mm")
+    assert error < 20
+
+
 def test_clicking_a_gap_selects_and_jumps(scene, data_dir):
     bpy = pytest.importorskip("bpy")
     path = data_dir / "cmu/c3d/01_01.c3d"  # real gaps
