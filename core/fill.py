@@ -356,6 +356,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         # points their rigid partners carry alone
         first = seen & (e_rigid < e_knn) & (e_rigid < alone ** 2 * probe.sum(axis=0))
         weight[first] = 0.0
+    weight[[motion.names.index(n) for n in lacking]] = 0.0  # the knowledge base has none of them
     ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
     # the knowledge base sees those as observed (they are never another point's donors: an
     # estimate carried on would add its error to the next)
@@ -391,10 +392,11 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                   report)
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
-    report(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped points "
-           f"more than the knowledge base"
-           + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
-              f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
+    if kb is not None:
+        report(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped "
+               f"points more than the knowledge base"
+               + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
+                  f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
     if lacking:
         report(_lacking_line(motion, out, lacking, kb is None))
     accounts = []
