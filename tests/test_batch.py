@@ -150,6 +150,22 @@ def test_the_knowledge_base_fills_a_batch_as_it_fills_one_file(library, data_dir
     assert "expected_mm,review_first" in report[0]
 
 
+def test_takes_no_knowledge_base_fits_are_filled_from_the_take_alone(data_dir, tmp_path):
+    """No -k and a marker set no starter knowledge base knows: `auto` fills each take from the
+    take alone (as `fill` does) where `knn` reports that it needs a knowledge base."""
+    take = read_motion(data_dir / "cmu/c3d/85_02.c3d").frame_range(0, 300)
+    positions = take.positions.copy()
+    positions[50:80, 5] = np.nan
+    take = take.replace(names=tuple(f"P{i}" for i in range(take.n_points)), positions=positions)
+    (tmp_path / "in").mkdir()
+    write_motion(take, tmp_path / "in" / "studio.c3d")
+    (row,) = run_batch([tmp_path / "in"], tmp_path / "auto", Options(method="auto"), jobs=1)
+    assert row["status"] == "filled" and row["samples_filled"] == 30, row["error"]
+    assert _same_as_fill(Path(row["input"]), Path(row["output"]), Options(method="auto"), None)
+    (row,) = run_batch([tmp_path / "in"], tmp_path / "knn", Options(method="knn"), jobs=1)
+    assert row["status"] == "failed" and "no starter knowledge base fits" in row["error"]
+
+
 def _children(pid):
     out = []
     for stat in Path("/proc").glob("[0-9]*/stat"):
