@@ -222,7 +222,7 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
                 if method in NEEDS_KB or take.kind == "armature":
                     raise GapFillError(f"'{owner.name}': {exc}; or choose a knowledge base "
                                        "(Mocap tab > Knowledge base)") from None
-                plan.messages.append(f"'{owner.name}': {exc}; until then, {TAKE_ALONE}")
+                plan.messages.append(f"{exc}; until then, {TAKE_ALONE}")
             else:
                 plan.messages.append(f"no knowledge base chosen: the starter {path.name} "
                                      f"({plan.kb.size} poses of CMU motion)")
