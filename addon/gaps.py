@@ -188,8 +188,9 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
     (:func:`~..core.bonefill.fill_bones`, method ``auto``): only the gapped bones' rotations
     change, and only on gaps where the knowledge base refills copies of the gap better than
     Blender's own interpolation; other methods fill joint positions and solve the bones.
-    Without a knowledge base (``kb`` None), methods that need one take the starter knowledge
-    base whose names match the take (:func:`~..core.kb.starter_kb`), or say why none fits."""
+    Without a knowledge base (``kb`` None), methods that use one take the starter knowledge
+    base whose names match the take (:func:`~..core.kb.starter_kb`); where none fits, ``auto``
+    fills a marker set from the take alone, and the others say why none fits."""
     from ..core.fill import NEEDS_KB, TAKE_ALONE, USES_KB, fill
     from ..core.kb import starter_kb
     from ..core.recover import KnnSettings

@@ -109,7 +109,8 @@ _KBS = {}
 
 def _knowledge_base(path, names, method):
     """The knowledge base for a take, loaded once per process: the file given, or the starter
-    one that fits the take's names; None for methods that need none."""
+    one that fits the take's names; None for methods that use none, and for ``auto`` where no
+    starter one fits (it fills from the take alone)."""
     from .fill import NEEDS_KB, USES_KB
     from .kb import load_kb, starter_kb
 
