@@ -166,10 +166,10 @@ class GapChoice:
     ``method``: the fill it took (``interp``: Blender's interpolation kept); ``share``: how far
     from the interpolation towards that fill (1: all the way, 0: the interpolation);
     ``estimate``: ``auto``'s judgement, the RMS joint error of that fill (at the share the
-    copies chose, before any consensus) on copies of the gap - the same bone and length, placed where the bone is
-    keyed - as a share of the interpolation's there (their geometric mean, drawn towards the
-    take's mean over all copies as ``auto`` scores them); NaN where no copies judged the
-    gap; ``consensus``: how far the fill then went on towards the mean of
+    copies chose, before any consensus) on copies of the gap - the same bone and length,
+    placed where the bone is keyed - as a share of the interpolation's there (their geometric
+    mean, drawn towards the take's mean over all copies as ``auto`` scores them); NaN where no
+    copies judged the gap; ``consensus``: how far the fill then went on towards the mean of
     :data:`CONSENSUS_FILLS` (0: not at all)."""
 
     bone: str

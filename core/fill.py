@@ -559,20 +559,20 @@ def _with_spline_ends(motion, out, copies, probe, spline, rigid_alone, report):
 
 def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     """``out`` with each gap blended with a cubic spline of its point through the take
-    (:func:`~.baselines.fill_spline`) and its pattern fill (:func:`~.baselines.fill_pattern`,
-    at :data:`AUTO_PATTERN_WEIGHT`) by inverse errors per sample: the spline's and the
-    pattern's on up to :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same
-    length, the nearest frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; not
-    finite where it has none) or, where ``rigid_alone`` says the rigid estimate fills the point
-    alone, that estimate's (``rigid_of(hidden)``: it on the samples ``hidden`` with those
-    hidden) on the spline's copies; ``spline`` is that spline of the take. Over a few frames a
-    point moves along a smooth curve that the spline follows within a millimetre, closer than
-    any estimate carried from other points; over longer gaps its error grows fast, with a tail
-    its copies do not foresee, so only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part.
-    Gaps at the take's ends (no spline across them) and points without a finite ``e_out`` keep
-    ``out``; the pattern joins only where a partner spans the gap and each of its copies.
-    Returns the blend and, per gap blended (``(point, first frame)``), the spline's and the
-    pattern's shares and the blend's expected squared error (the errors as if independent)."""
+    (:func:`~.baselines.fill_spline`) and its pattern fill (:func:`~.baselines.fill_pattern`, at
+    :data:`AUTO_PATTERN_WEIGHT`) by inverse errors per sample: the spline's and the pattern's on up
+    to :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
+    frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; not finite
+    where it has none) or, where ``rigid_alone`` says the rigid estimate fills the point alone, that
+    estimate's (``rigid_of(hidden)``: it on the samples ``hidden`` with those hidden) on the
+    spline's copies; ``spline`` is that spline of the take. Over a few frames a point moves along a
+    smooth curve that the spline follows within a millimetre, closer than any estimate carried from
+    other points; over longer gaps its error grows fast, with a tail its copies do not foresee, so
+    only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline
+    across them) and points without a finite ``e_out`` keep ``out``; the pattern joins only where a
+    partner spans the gap and each of its copies. Returns the blend and, per gap blended (``(point,
+    first frame)``), the spline's and the pattern's shares and the blend's expected squared error
+    (the errors as if independent)."""
     from .baselines import fill_pattern, fill_spline
 
     missing = motion.missing
