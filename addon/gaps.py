@@ -190,7 +190,8 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
     Blender's own interpolation; other methods fill joint positions and solve the bones.
     Without a knowledge base (``kb`` None), methods that use one take the starter knowledge
     base whose names match the take (:func:`~..core.kb.starter_kb`); where none fits, ``auto``
-    fills a marker set from the take alone, and the others say why none fits."""
+    fills from the take alone, and the others say why none fits."""
+    from ..core import bonefill
     from ..core.fill import NEEDS_KB, TAKE_ALONE, USES_KB, fill
     from ..core.kb import starter_kb
     from ..core.recover import KnnSettings
@@ -220,10 +221,11 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
             try:
                 path, plan.kb = starter_kb(list(take.names))
             except GapFillError as exc:
-                if method in NEEDS_KB or take.kind == "armature":
+                if method in NEEDS_KB:
                     raise GapFillError(f"'{owner.name}': {exc}; or choose a knowledge base "
                                        "(Mocap tab > Knowledge base)") from None
-                plan.messages.append(f"{exc}; until then, {TAKE_ALONE}")
+                alone = bonefill.TAKE_ALONE if take.kind == "armature" else TAKE_ALONE
+                plan.messages.append(f"{exc}; until then, {alone}")
             else:
                 plan.messages.append(f"no knowledge base chosen: the starter {path.name} "
                                      f"({plan.kb.size} poses of CMU motion)")
@@ -311,18 +313,16 @@ def how_filled(choices, bone, first, last):
     """``(how, estimate, 0)`` of a listed gap of ``bone`` over the take's rows ``first``-``last``
     from the rotation fill's choices of the gaps it overlaps: the fill (``interp``: Blender's
     interpolation kept; with the share of the way from it where the fill went part of the way,
-    and how far on towards the knowledge base's motion and the take's own regression)
+    and how far on towards the consensus: the knowledge base's motion and the take's own
+    regression, or the regression alone without a knowledge base)
     and the copies' estimate of its error as a share of the interpolation's (the largest where
     several, 0 where none judged it). No error in millimetres: an armature's copies foretell
     the share, not the level (docs/METHOD_NOTES.md, session 34)."""
-    from ..core.bonefill import CONSENSUS_FILLS
-
     parts = [c for c in choices if c.bone == bone and c.first <= last and c.last >= first]
     if not parts:
         return "", 0.0, 0.0
-    towards = " + ".join(CONSENSUS_FILLS)
     labels = [(c.method if c.share in (0.0, 1.0) else f"{c.method} ({c.share:.0%} of the way)")
-              + (f", then {c.consensus:.0%} to {towards}" if c.consensus else "")
+              + (f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0

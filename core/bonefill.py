@@ -44,7 +44,11 @@ frames:
   ``interp`` where it and ``regress`` agree far more closely than either does with ``match``;
   with a knowledge base of positions only, ``knn``, ``half`` (half-way from ``interp`` to
   ``knn``) and ``recall`` (subtrees carried onto the knowledge base's guess from the known
-  joints alone: a KB that holds the motion) stand in;
+  joints alone: a KB that holds the motion) stand in; without a knowledge base (a rig no
+  starter one fits) it chooses the same way from the take's own fills - ``hermite``,
+  ``regress``, ``regress_kernel`` and their stacks with ``interp`` - and its long gaps go
+  halfway on to ``regress_kernel``; in a take too short for copies, short gaps take
+  ``hermite`` and long ones go halfway from ``interp`` to ``regress_kernel``;
 - ``slerp``: quaternion slerp between the rotations at the keys either side;
 - ``positions``: the position-space fill of every joint below a gap, then each gapped bone turned
   to its children's filled joints (what the add-on did before; kept for comparison).
@@ -111,7 +115,25 @@ AUTO_DOUBT = 0.1
 REGRESS_LAGS = (0.05, 0.1)
 REGRESS_WINDOW = 3.0
 REGRESS_RIDGE = 0.1
-NEEDS_KB = ("auto", "knn", "match", "positions")
+#: the methods that take a knowledge base, and those that cannot fill without one (``auto``
+#: fills from the take alone: :data:`TAKE_ALONE_CANDIDATES`)
+USES_KB = ("auto", "knn", "match", "positions")
+NEEDS_KB = ("knn", "match", "positions")
+#: the candidates that come from a knowledge base
+KB_FILLS = ("knn", "half", "recall", "match", "mix")
+#: what ``auto`` chooses from beside ``interp`` without a knowledge base (a rig no starter one
+#: fits, none chosen): the take's own fills, stacked as :data:`STACK_FILLS` and
+#: :data:`LONG_STACK_FILLS` are without those of :data:`KB_FILLS` (chosen on non-test takes,
+#: docs/METHOD_NOTES.md, session 37)
+TAKE_ALONE_CANDIDATES = ("hermite", "regress", "regress_kernel")
+TAKE_ALONE_CONSENSUS = ("regress_kernel",)
+#: in a take too short for copies, without a knowledge base, a gap of :data:`LONG_GAP` seconds
+#: or more goes this share of the way from ``interp`` to ``regress_kernel`` (a shorter one takes
+#: ``hermite``): unjudged, so part of the way (chosen on 1.5 s cuts of non-test takes,
+#: docs/METHOD_NOTES.md, session 37)
+TAKE_ALONE_UNJUDGED = 0.5
+TAKE_ALONE = ("auto fills from the take alone (its own regression, a cubic and Blender's "
+              "interpolation, judged on copies of the gaps)")
 #: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
 #: of interpolation's (the better candidate where both are), on gaps of :data:`LONG_GAP`
 #: seconds or more and on shorter ones, where interpolation is hard to beat: part of the way
@@ -170,7 +192,8 @@ class GapChoice:
     placed where the bone is keyed - as a share of the interpolation's there (their geometric
     mean, drawn towards the take's mean over all copies as ``auto`` scores them); NaN where no
     copies judged the gap; ``consensus``: how far the fill then went on towards the mean of
-    :data:`CONSENSUS_FILLS` (0: not at all)."""
+    the fills named in ``towards`` (0: not at all; :data:`CONSENSUS_FILLS`, without a
+    knowledge base :data:`TAKE_ALONE_CONSENSUS`, joined by " + ")."""
 
     bone: str
     first: int
@@ -179,6 +202,7 @@ class GapChoice:
     share: float
     estimate: float = float("nan")
     consensus: float = 0.0
+    towards: str = ""
 
 
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
@@ -199,7 +223,8 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
         bone moves (``moves``).
     fps : float
     kb : KnowledgeBase, optional
-        Needed by ``knn``, ``auto`` and ``positions``; joint names = bone names.
+        Needed by ``knn``, ``match`` and ``positions``; ``auto`` without one fills from the
+        take alone. Joint names = bone names.
     method : str
         One of :data:`BONE_METHODS`.
     moves : ndarray, shape (bones,), bool, optional
@@ -221,8 +246,9 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     if method not in BONE_METHODS:
         raise GapFillError(f"unknown method {method!r}; choose from {', '.join(BONE_METHODS)}")
     if method in NEEDS_KB and kb is None:
-        raise GapFillError(f"method {method!r} needs a knowledge base")
-    if method in NEEDS_KB:
+        raise GapFillError(f"method {method!r} needs a knowledge base; without one, 'auto' "
+                           "fills from the take alone")
+    if method in USES_KB and kb is not None:
         match_names(kb, rig.names)  # a knowledge base of another skeleton: a clear error now
     if method == "match" and kb.turns is None:
         raise GapFillError("method 'match' needs a knowledge base with bone rotations: build it "
@@ -257,8 +283,10 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     choices = job.choices or [(method, 0.0 if method == "interp" else 1.0)] * len(runs)
     estimates = job.estimates or [float("nan")] * len(runs)
     consensus = job.consensus or [0.0] * len(runs)
-    return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate), towards)
-                   for (b, a, e), (name, share), estimate, towards
+    towards = " + ".join(job.consensus_fills)
+    return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate), further,
+                             towards if further else "")
+                   for (b, a, e), (name, share), estimate, further
                    in zip(runs, choices, estimates, consensus)]
 
 
@@ -278,6 +306,13 @@ class _Job:
         # auto's choice per gap, its estimate of it from the copies and how far the gap then
         # went on to the long-gap consensus (None: not auto)
         self.choices = self.estimates = self.consensus = None
+        # the fills auto stacks, and those its long gaps go on to: without a knowledge base,
+        # the take's own
+        self.stack_fills, self.long_fills = (
+            (STACK_FILLS, LONG_STACK_FILLS) if kb is not None else
+            tuple(tuple(f for f in fills if f not in KB_FILLS)
+                  for fills in (STACK_FILLS, LONG_STACK_FILLS)))
+        self.consensus_fills = CONSENSUS_FILLS if kb is not None else TAKE_ALONE_CONSENSUS
 
     def moved_by(self, b):
         """(joints,) bool: the joints bone ``b`` moves (below it, and its own where it moves)."""
@@ -498,13 +533,13 @@ class _Job:
             out["regress_pose"] = self.regress(channels, location, gaps, interp, lags=())
         if "regress_kernel" in names:
             out["regress_kernel"] = self.regress(channels, location, gaps, interp, kernel=True)
-        fillable = self.for_kb(gaps)
+        fillable = self.for_kb(gaps) if set(KB_FILLS) & set(names) else None
         if {"hermite", "knn", "half", "mix"} & set(names):
             out["hermite"] = self.hermite(channels, location, gaps, interp)
         if {"knn", "half"} & set(names):
             out["knn"] = self.knn(out["hermite"], fillable)
             out["half"] = halfway(out["interp"], out["knn"], gaps)
-        if {"match", "mix"} & set(names) and self.kb.turns is not None:
+        if {"match", "mix"} & set(names) and self.kb is not None and self.kb.turns is not None:
             out["match"] = self.match(out["interp"], fillable)
             if "mix" in names:
                 out["mix"] = halfway(out["hermite"], out["match"], gaps, MIX_SHARE)
@@ -533,23 +568,35 @@ class _Job:
         interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`). Last,
         each gap of :data:`LONG_STACK` seconds or more (where ``stack_long`` is made) that
         does not keep the interpolation goes :data:`CONSENSUS` of the way on from its fill to
-        the mean of :data:`CONSENSUS_FILLS`."""
-        rotations = self.kb.turns is not None
-        if not rotations:
+        the mean of :data:`CONSENSUS_FILLS`. Without a knowledge base the same from the take
+        alone: :data:`TAKE_ALONE_CANDIDATES`, the stacks without the knowledge base's fills,
+        the consensus :data:`TAKE_ALONE_CONSENSUS`; a take without copies takes ``hermite`` on
+        gaps shorter than :data:`LONG_GAP` and goes :data:`TAKE_ALONE_UNJUDGED` of the way to
+        ``regress_kernel`` on longer ones."""
+        alone = self.kb is None
+        rotations = alone or self.kb.turns is not None
+        if alone:
+            self.report("auto: no knowledge base: " + TAKE_ALONE.removeprefix("auto "))
+        elif not rotations:
             self.report("auto: the knowledge base holds no bone rotations (built from markers "
                         "or by an older version): filled from its joint positions; rebuild it "
                         "with 'kb build' from BVH or ASF/AMC takes for the rotation fill")
-        names = AUTO_CANDIDATES if rotations else AUTO_POSITIONS
+        names = (TAKE_ALONE_CANDIDATES if alone else AUTO_CANDIDATES if rotations
+                 else AUTO_POSITIONS)
         copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
         stack = rotations and bool(copies)  # the weights come from the copies
         runs = gap_runs(gaps)
         choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps else names[1],
                    1.0) for _, a, e in runs]
+        if alone:  # nothing to judge by: the cubic on short gaps, part of the way to the
+            # take's own regression on long ones
+            choice = [("hermite", 1.0) if (e - a + 1) < LONG_GAP * self.fps
+                      else ("regress_kernel", TAKE_ALONE_UNJUDGED) for _, a, e in runs]
         estimates = [float("nan")] * len(runs)
         longest = [rotations and (e - a + 1) >= LONG_STACK * self.fps
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
-        fills = LONG_STACK_FILLS if any(longest) else STACK_FILLS if stack else ()
+        fills = self.long_fills if any(longest) else self.stack_fills if stack else ()
         if any(longest) and not copies:  # nothing to weigh the fills by: equal parts
             long_table = np.full((len(stacking.DISTANCES), len(stacking.LENGTHS), len(fills)),
                                  1 / len(fills))
@@ -567,7 +614,7 @@ class _Job:
             if stack:  # each copy stacked with weights its own gap's copies had no part in
                 table, alone, long_table = self._stack_tables(tried, truth, copies, fills)
                 of_copy = {(b, start): alone[i] for i, b, start, _ in copies}
-                tried["stack"] = self._stacked(tried, gaps | probe, STACK_FILLS,
+                tried["stack"] = self._stacked(tried, gaps | probe, self.stack_fills,
                                                lambda b, a: of_copy.get((b, a), table))
                 names = names + ("stack",)
             base = self._errors(tried["interp"], truth, copies)
@@ -601,17 +648,20 @@ class _Job:
             made = self.candidates(channels, location, wanted,
                                    {name for name, _ in choice} | set(fills), seen)
             if stack:
-                made["stack"] = self._stacked(made, wanted, STACK_FILLS, lambda b, a: table)
+                made["stack"] = self._stacked(made, wanted, self.stack_fills,
+                                              lambda b, a: table)
                 choice = self._doubted(made, runs, choice)
             if any(longest):
-                made["stack_long"] = self._stacked(made, wanted, LONG_STACK_FILLS,
+                made["stack_long"] = self._stacked(made, wanted, self.long_fills,
                                                    lambda b, a: long_table)
-            if rotations and not copies:
+            if rotations and not alone and not copies:
                 choice = self._outvoted(channels, location, wanted, seen, made, runs, choice)
-        agree = CONSENSUS if wanted.any() and set(CONSENSUS_FILLS) <= set(made) else 0.0
+        towards = self.consensus_fills
+        agree = CONSENSUS if wanted.any() and set(towards) <= set(made) else 0.0
         self.choices, self.estimates = choice, estimates
-        self.consensus = [agree if last and name != "interp" else 0.0
-                          for (name, _), last in zip(choice, longest)]
+        self.consensus = [agree if last and name != "interp"
+                          and (share < 1 or set(towards) != {name}) else 0.0  # there already
+                          for (name, share), last in zip(choice, longest)]
         counts, partly = {}, {}
         for name, share in choice:
             counts[name] = counts.get(name, 0) + 1
@@ -622,18 +672,20 @@ class _Job:
             + (f" ({partly[name]} part of the way from the interpolation)" if partly[name] else "")
             for name, n in counts.items())
             + (f"; then {together} long gaps {agree:.0%} of the way on to "
-               f"{' + '.join(CONSENSUS_FILLS)}" if together else ""))
+               f"{' + '.join(towards)}" if together else ""))
         if not wanted.any():
             return seen
         out = seen.copy()
-        for (b, a, e), (name, share), towards in zip(runs, choice, self.consensus):
+        for (b, a, e), (name, share), further in zip(runs, choice, self.consensus):
             if name == "interp":
                 continue
             span, rows = np.ones((e - a + 1, 1), bool), slice(a, e + 1)
             fill = halfway(seen[rows, b:b + 1], made[name][rows, b:b + 1], span, share)
-            if towards:
-                first, second = (made[key][rows, b:b + 1] for key in CONSENSUS_FILLS)
-                fill = halfway(fill, halfway(first, second, span), span, towards)
+            if further:  # the mean of the fills, each of k taking 1/k of the way
+                target = made[towards[0]][rows, b:b + 1]
+                for k, key in enumerate(towards[1:], 2):
+                    target = halfway(target, made[key][rows, b:b + 1], span, 1 / k)
+                fill = halfway(fill, target, span, further)
             out[rows, b] = fill[:, 0]
         return out
 
@@ -676,14 +728,15 @@ class _Job:
         if not spans:
             return choice
         worlds = {key: self._spans(made[key], spans)
-                  for key in {"stack", *STACK_FILLS} | {choice[i][0] for i, *_ in spans}}
+                  for key in {"stack", *self.stack_fills} | {choice[i][0] for i, *_ in spans}}
         choice = list(choice)
         for k, (i, b, _, _) in enumerate(spans):
             name, share = choice[i]
             joints = self.moved_by(b)
-            at = {key: worlds[key][k][:, joints] for key in {name, "stack", *STACK_FILLS}}
+            at = {key: worlds[key][k][:, joints] for key in {name, "stack", *self.stack_fills}}
             away = share ** 2 * np.sum((at[name] - at["interp"]) ** 2)
-            doubt = np.mean([np.sum((at[fill] - at["stack"]) ** 2) for fill in STACK_FILLS[1:]])
+            doubt = np.mean([np.sum((at[fill] - at["stack"]) ** 2)
+                             for fill in self.stack_fills[1:]])
             choice[i] = (name, share * float(away / (away + AUTO_DOUBT * doubt + 1e-12)))
         return choice
 
@@ -701,7 +754,7 @@ class _Job:
                 [world[k][:, joints] - truth[span, joints] for world in worlds], self.fps)
             per_gap[i] = tuple(a + m for a, m in zip(per_gap.get(i, (0.0, 0.0)), moments))
             total = tuple(a + m for a, m in zip(total, moments))
-        n = len(STACK_FILLS)
+        n = len(self.stack_fills)
         table = stacking.weights(total[0][..., :n, :n], total[1], STACK_RIDGE)
         alone = {i: stacking.weights((total[0] - sums)[..., :n, :n], total[1] - counts,
                                      STACK_RIDGE) for i, (sums, counts) in per_gap.items()}
