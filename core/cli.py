@@ -252,8 +252,10 @@ def cmd_batch(args):
 def cmd_evaluate(args):
     from .evaluate import evaluate, table
 
-    if not args.kb_sources and not args.kb:
-        raise GapFillError("give the knowledge base: --kb-sources PATH... (or --kb KB.npz)")
+    given = sum((bool(args.kb_sources), bool(args.kb), args.no_kb))
+    if given != 1:
+        raise GapFillError("give the knowledge base: --kb-sources PATH... or --kb KB.npz (or "
+                           "--no-kb: auto from the take alone)" + (", one of them" if given else ""))
     progress = Progress(args.quiet)
     if args.protocol == "bones":
         from .bonefill import BONE_BASELINES, BONE_METHODS
@@ -286,7 +288,7 @@ def cmd_evaluate(args):
                    "baselines": [m for m in baselines if m in methods], "fps": args.fps,
                    "seed": args.seed, "k": args.k,
                    "tests": [str(t) for t in args.test],
-                   "kb_sources": [str(s) for s in args.kb_sources or [args.kb]],
+                   "kb_sources": [str(s) for s in args.kb_sources or [args.kb] if s],
                    "results": results}
         Path(args.json).write_text(json.dumps(payload, indent=1))
         print(f"wrote {args.json}")
@@ -410,6 +412,9 @@ def build_parser(extra=None):
     p.add_argument("--kb", metavar="KB.npz",
                    help="a knowledge-base file instead of --kb-sources (e.g. a starter one; "
                         "the test subject is still left out)")
+    p.add_argument("--no-kb", action="store_true",
+                   help="no knowledge base: auto fills from the take alone, as on a skeleton or "
+                        "marker set no knowledge base fits (the methods that need one score inf)")
     p.add_argument("--methods", nargs="+", metavar="METHOD",
                    help=f"some of {', '.join(METHODS)} (default: all of the protocol's)")
     p.add_argument("--settings", nargs="+", metavar="LABEL",

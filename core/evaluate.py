@@ -174,21 +174,23 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
     """Run a protocol; a list of result dicts (method, setting, test, rmse_missing_mm, ...).
     Where a method cannot fill a take-setting (a :class:`GapFillError`: e.g. the root gone from
     every frame of a short take) it is reported, scored as filling nothing (inf) with the
-    message under ``error``, and the run goes on."""
+    message under ``error``, and the run goes on. Neither ``kb_sources`` nor ``kb_file``: no
+    knowledge base (what ``auto`` does with the take alone; the methods that need one score
+    inf)."""
     report = report or (lambda message: None)
     chosen = [s for s in settings_of(protocol, gap_sources)
               if settings is None or s[0] in settings]
     if protocol == "realgaps":  # the gap sources' masks, read once
         chosen = [(label, _at_rate(read_motion(path, skip_frames=skip_frames), fps))
                   for label, path in chosen]
-    full_kb = load_kb(kb_file) if kb_file else build_kb(
-        kb_sources, fps=fps, skip_frames=skip_frames, exclude=exclude, report=report)
+    full_kb = _full_kb(kb_sources, kb_file, fps, skip_frames, exclude, report)
     results = []
     total = len(tests) * len(chosen) * len(methods)
     done = 0
     for test in tests:
-        truth = complete_take(read_motion(test, skip_frames=skip_frames), full_kb.names, fps)
-        kb = kb_without(full_kb, subject_of(test))
+        truth = complete_take(read_motion(test, skip_frames=skip_frames),
+                              None if full_kb is None else full_kb.names, fps)
+        kb = None if full_kb is None else kb_without(full_kb, subject_of(test))
         for label, setting in chosen:
             rng = np.random.default_rng([seed, *label.encode()])
             miss = punch_gaps(truth.n_frames, truth.n_points, protocol, setting, rng, truth.names)
@@ -197,7 +199,7 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
                 start = time.perf_counter()
                 try:
                     out, failed = fill(query, method, kb=kb, settings=KnnSettings(
-                        k=None if k is None else min(k, kb.size))), {}
+                        k=None if k is None or kb is None else min(k, kb.size))), {}
                 except GapFillError as error:  # e.g. a short take whose root is gone throughout:
                     # nothing filled (every missing sample infinitely wrong), the run goes on
                     report(f"{Path(test).name} {label} {method}: {error}")
@@ -213,6 +215,16 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
     return results
 
 
+def _full_kb(kb_sources, kb_file, fps, skip_frames, exclude, report):
+    """The protocols' knowledge base: the file, else one built from the sources; None without
+    either."""
+    if kb_file:
+        return load_kb(kb_file)
+    if not kb_sources:
+        return None
+    return build_kb(kb_sources, fps=fps, skip_frames=skip_frames, exclude=exclude, report=report)
+
+
 def _at_rate(motion, fps):
     return motion.replace(positions=resample(motion.positions, motion.fps, fps), fps=fps,
                           filled=None)
@@ -220,9 +232,9 @@ def _at_rate(motion, fps):
 
 def complete_take(motion, names, fps=None):
     """The truth a protocol punches gaps into: the motion at ``fps`` (default: its own rate),
-    its points that ``names`` (a knowledge base's) has, its complete frames only."""
+    its points that ``names`` (a knowledge base's; None: all) has, its complete frames only."""
     motion = _at_rate(motion, fps or motion.fps)
-    motion = motion.select([n for n in motion.names if n in names])
+    motion = motion.select([n for n in motion.names if names is None or n in names])
     return motion.replace(positions=motion.positions[~motion.missing.any(axis=1)])
 
 
@@ -283,8 +295,7 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
     from .rig import basis_matrices, interpolate_channels
 
     report = report or (lambda message: None)
-    full_kb = load_kb(kb_file) if kb_file else build_kb(
-        kb_sources, fps=kb_fps, skip_frames=skip_frames, exclude=exclude, report=report)
+    full_kb = _full_kb(kb_sources, kb_file, kb_fps, skip_frames, exclude, report)
     chosen = [(f"n={n},l={l}", (n, l)) for n, l in BONE_SETTINGS
               if settings is None or f"n={n},l={l}" in settings]
     results = []
@@ -292,8 +303,8 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
     done = 0
     for test in tests:
         rig, channels, location, fps = read_rig_take(test, skip_frames)
-        kb = kb_without(full_kb, subject_of(test))
-        knn = KnnSettings(k=None if k is None else min(k, kb.size))
+        kb = None if full_kb is None else kb_without(full_kb, subject_of(test))
+        knn = KnnSettings(k=None if k is None or kb is None else min(k, kb.size))
         truth = basis_matrices(rig, channels, location)
         candidates = gappable_bones(rig)
         for label, setting in chosen:

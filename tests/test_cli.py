@@ -207,6 +207,35 @@ def test_evaluate_bones_goes_on_past_a_method_that_cannot_fill(data_dir, tmp_pat
     assert len(rows["interp"]["gaps_mm"]) == len(rows["match"]["gaps_mm"]) == 4  # 129 frames
 
 
+def test_evaluate_without_a_knowledge_base(data_dir, tmp_path):
+    """`evaluate --no-kb`: what `auto` does on a rig or a marker set no knowledge base fits (the
+    take alone), beside the methods that need one (scored inf, the run goes on); a knowledge
+    base and --no-kb together, or neither, is a clear error."""
+    out = tmp_path / "alone.json"
+    r = cli("evaluate", "--protocol", "bones", "--settings", "n=1,l=30", "--methods", "interp",
+            "auto", "match", "--test", data_dir / "cmu/bvh/daz_friendly/09/09_03.bvh.gz",
+            "--no-kb", "--json", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    payload = json.loads(out.read_text())
+    assert payload["kb_sources"] == []
+    rows = {row["method"]: row for row in payload["results"]}
+    assert rows["match"]["rmse_missing_mm"] == np.inf and "needs a knowledge base" in \
+        rows["match"]["error"]
+    assert 0 < rows["auto"]["rmse_missing_mm"] < np.inf and "error" not in rows["auto"]
+    out = tmp_path / "markers.json"
+    r = cli("evaluate", "--protocol", "markers", "--settings", "rate=0.1", "--methods", "auto",
+            "knn", "--test", data_dir / "cmu/c3d/85_02.c3d", "--fps", "120", "--no-kb",
+            "--json", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    rows = {row["method"]: row for row in json.loads(out.read_text())["results"]}
+    assert rows["knn"]["rmse_missing_mm"] == np.inf
+    assert 0 < rows["auto"]["rmse_missing_mm"] < np.inf
+    for extra in ((), ("--no-kb", "--kb", tmp_path / "kb.npz")):
+        r = cli("evaluate", "--protocol", "bones", "--test", data_dir / "cmu/c3d/85_02.c3d",
+                *extra, "--quiet")
+        assert r.returncode == 2 and "--no-kb" in r.stderr and "Traceback" not in r.stderr
+
+
 def test_evaluate_real_gaps(data_dir, tmp_path):
     """realgaps: the gaps 01_01.c3d really has (RBAC, its last 30 frames), by name, on other
     takes of the same marker set."""

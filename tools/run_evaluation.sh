@@ -57,3 +57,12 @@ $MG evaluate --protocol bones --quiet --skip-frames 6 --kb-sources "$DAZ" \
 $MG evaluate --protocol bones --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
   --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
   --json docs/results/bones_amc31.json
+# the same gaps without a knowledge base (a rig no starter one fits): auto from the take alone
+$MG evaluate --protocol bones --quiet --skip-frames 6 --no-kb --methods interp auto \
+  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
+         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
+         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --json docs/results/bones_bvh43_no_kb.json
+$MG evaluate --protocol bones --quiet --no-kb --methods interp auto \
+  --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
+  --json docs/results/bones_amc31_no_kb.json
