@@ -357,22 +357,16 @@ def test_bvh_armature_fill_beats_blender_interpolation(daz_armature, daz_kb, dat
     after = bridge.read_take(arm, scene)
     m = truth.metres
     below = rig.placed_by()
-    totals = [0.0, 0.0]
-    for bone, first, last in BONE_GAPS:
-        rows = slice(first - broken.first, last - broken.first + 1)
-        joints = below[rig.names.index(bone)]
-        fill_mm, interp_mm = (rmse_mm(x.positions[rows][:, joints] * m,
-                                      truth.positions[rows][:, joints] * m)
-                              for x in (after, broken))
-        print(f"{bone} {first}-{last}: default fill {fill_mm:.1f} mm, Blender's interpolation "
-              f"{interp_mm:.1f} mm")
+    errors = gap_errors(arm, broken, after, truth)
+    for gap, fill_mm, interp_mm in errors:
+        print(f"{gap.point} {gap.first}-{gap.last}: default fill {fill_mm:.1f} mm, Blender's "
+              f"interpolation {interp_mm:.1f} mm")
         # measured 120.6 / 61.9 / 6.7 vs 130.0 / 83.8 / 7.4 (125.6 / 76.1 / 7.4 before the
         # long-gap consensus and the scene's 120.000048 fps read as 120; session 8: the shin gap
         # came out worse, 94.3); issue 14's bar per gap
         assert fill_mm <= 1.1 * interp_mm + 2.0
-        totals = [t + x ** 2 * (last - first + 1) for t, x in zip(totals, (fill_mm, interp_mm))]
     # over the three gaps together: measured 12 % better (RMSE; session 34: 5 %, session 8: 2.7 %)
-    assert totals[0] < totals[1]
+    assert total_mm(errors, 1) < total_mm(errors, 2)
     # joints no gap reaches did not move
     missing = bridge.missing_points(broken, bone_gaps)
     assert np.abs(after.positions[~missing] - truth.positions[~missing]).max() * m < 1e-4
@@ -551,26 +545,37 @@ def test_a_rig_no_knowledge_base_knows_fills_from_the_take_alone(scene, data_dir
         "interpolation, judged on copies of the gaps)")
     assert bpy.ops.mocap_gapfill.fill_gaps() == {"FINISHED"}
     after = bridge.read_take(arm, scene)
-    m = truth.metres
-    totals = [0.0, 0.0]
-    frames = broken.positions.shape[0]
-    for gap in arm.mocap_gapfill.gaps:
+    errors = gap_errors(arm, broken, after, truth)
+    for gap, fill_mm, interp_mm in errors:
         assert gap.filled and gap.how
-        rows = slice(gap.first - broken.first, gap.last - broken.first + 1)
-        joints = bridge.missing_points(broken, gaps.gap_mask([gap], broken.points, broken.first,
-                                                             frames))[rows].any(axis=0)
-        fill_mm, interp_mm = (rmse_mm(x.positions[rows][:, joints] * m,
-                                      truth.positions[rows][:, joints] * m)
-                              for x in (after, broken))
         print(f"{gap.point}: {'; '.join(gaps.describe(gap, True))}: {fill_mm:.1f} mm, "
               f"Blender's interpolation {interp_mm:.1f} mm")
         assert fill_mm <= 1.1 * interp_mm + 2.0
-        totals = [t + x ** 2 * (gap.last - gap.first + 1) for t, x in zip(totals,
-                                                                          (fill_mm, interp_mm))]
-    assert totals[0] < 1.05 ** 2 * totals[1]
-    unmoved = ~bridge.missing_points(broken, gaps.gap_mask(arm.mocap_gapfill.gaps, broken.points,
-                                                           broken.first, frames))
-    assert np.abs(after.positions[unmoved] - truth.positions[unmoved]).max() * m < 1e-4
+    assert total_mm(errors, 1) < 1.05 * total_mm(errors, 2)
+    unmoved = ~bridge.missing_points(broken, gaps.gap_mask(
+        arm.mocap_gapfill.gaps, broken.points, broken.first, broken.positions.shape[0]))
+    assert np.abs(after.positions[unmoved] - truth.positions[unmoved]).max() * truth.metres < 1e-4
+
+
+def gap_errors(arm, broken, after, truth):
+    """``(gap, fill mm, Blender's interpolation mm)`` per listed gap of an armature: the RMSE
+    over its frames of the joints its bone moves, against the untouched take."""
+    bridge, _, gaps, _ = modules()
+    out = []
+    for gap in arm.mocap_gapfill.gaps:
+        rows = slice(gap.first - broken.first, gap.last - broken.first + 1)
+        joints = bridge.missing_points(broken, gaps.gap_mask(
+            [gap], broken.points, broken.first, broken.positions.shape[0]))[rows].any(axis=0)
+        out.append((gap, *(rmse_mm(x.positions[rows][:, joints] * truth.metres,
+                                   truth.positions[rows][:, joints] * truth.metres)
+                           for x in (after, broken))))
+    return out
+
+
+def total_mm(errors, column):
+    """The RMSE of ``gap_errors``' fill (column 1) or interpolation (2) over all their frames."""
+    frames = [gap.last - gap.first + 1 for gap, *_ in errors]
+    return float(np.sqrt(np.average([e[column] ** 2 for e in errors], weights=frames)))
 
 
 def test_scene_fps_reads_a_bvh_rate_as_the_command_line_does(scene):
