@@ -289,7 +289,8 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
 
     Scores: :func:`bone_errors`. A method that cannot fill a take-setting (a
     :class:`GapFillError`) is reported and scored inf, with the message under ``error``, as in
-    :func:`evaluate`; the run goes on.
+    :func:`evaluate`; the run goes on. Neither ``kb_sources`` nor ``kb_file``: no knowledge
+    base, as in :func:`evaluate`.
     """
     from .bonefill import fill_bones
     from .rig import basis_matrices, interpolate_channels
