@@ -248,8 +248,11 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     if method in NEEDS_KB and kb is None:
         raise GapFillError(f"method {method!r} needs a knowledge base; without one, 'auto' "
                            "fills from the take alone")
-    if method in USES_KB and kb is not None:
-        match_names(kb, rig.names)  # a knowledge base of another skeleton: a clear error now
+    if method in USES_KB and kb is not None:  # another skeleton's: a clear error now
+        lacking = match_names(kb, rig.names)[1]
+        if lacking and report:
+            report("not in the knowledge base, left to the fills that need none (the cubic, the "
+                   f"take's own regression, Blender's interpolation): {', '.join(lacking)}")
     if method == "match" and kb.turns is None:
         raise GapFillError("method 'match' needs a knowledge base with bone rotations: build it "
                            "with 'kb build' from BVH or ASF/AMC takes of this skeleton")

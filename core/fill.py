@@ -187,6 +187,9 @@ def _fill(motion, method, kb, settings, progress, should_cancel, report):
     if method == "knn":
         from .recover import KnnSettings, fill_knn  # scipy.optimize only when needed
 
+        lacking = match_names(kb, motion.names)[1]
+        if lacking and report:
+            report(f"not in the knowledge base, left unfilled: {', '.join(lacking)}")
         return fill_knn(motion, kb, settings or KnnSettings(), progress=progress,
                         should_cancel=should_cancel, report=report)
     if method == "pca":
@@ -257,7 +260,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
 
     from .baselines import rigid_estimates
     from .matching import fill_match
-    from .recover import LACKING, KnnSettings, fill_knn
+    from .recover import KnnSettings, fill_knn
     from .regression import regress_points
 
     report = report or (lambda message: None)
@@ -365,7 +368,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     # the points the knowledge base lacks are named below, with what became of them
     knn = nowhere if kb is None else fill_knn(
         given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
-        should_cancel=should_cancel, report=lambda m: m.startswith(LACKING) or report(m)).positions
+        should_cancel=should_cancel, report=report).positions
     if long.any() and (windows > 0).any():
         knn = _mix_in(knn, fill_match(given, kb, windows > 0, should_cancel).positions, windows)
         report(f"auto: windows of the knowledge base's motion join its models on "

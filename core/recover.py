@@ -61,7 +61,8 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
     """Fill the gaps of ``motion`` from the knowledge base ``kb``.
 
     Returns a new :class:`~mocap_gapfill.core.motion.Motion` whose missing samples (of the points
-    the knowledge base knows) are filled and marked in ``filled``; observed samples are kept.
+    the knowledge base knows) are filled and marked in ``filled``; observed samples are kept,
+    and the points it does not know are left as they are (the callers say what becomes of them).
 
     A long take is filled piece by piece (:func:`pieces`): each piece exactly as if it were a
     take of its own, the shared frames of two pieces cross-faded linearly from the one to the
@@ -106,16 +107,9 @@ def fill_knn(motion, kb, settings=KnnSettings(), progress=None, should_cancel=No
     return motion.replace(positions=out, filled=filled)
 
 
-#: how the knowledge-base fill names the points it does not know (``auto`` says what became of
-#: them instead: its other estimates need no knowledge base)
-LACKING = "not in the knowledge base"
-
-
 def _fill_piece(motion, kb, settings, progress, should_cancel, report):
     """:func:`fill_knn` of one piece."""
-    common, lacking = match_names(kb, motion.names)
-    if lacking:
-        report(f"{LACKING}, left unfilled: {', '.join(lacking)}")
+    common, _ = match_names(kb, motion.names)
     reference = kb.reference_for(common)
     q_index = [motion.names.index(n) for n in common]
     pos = motion.positions[:, q_index]
