@@ -292,7 +292,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
 
     rigid, spread = carried(motion)
-    nowhere = np.full(motion.positions.shape, np.nan)  # the knowledge base's fill without one
+    # the knowledge base's fill where there is none
+    nowhere = np.full(motion.positions.shape, np.nan) if kb is None else None
     # the copies are refilled as the gaps will be: where rigid partners carry a point closely
     # through a gap, the knowledge base sees it there (below), so it is seen at the copies too
     hidden = motion.replace(positions=np.where(
