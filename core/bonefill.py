@@ -7,8 +7,11 @@ F-curve interpolation of the keys either side (``interp``): free and often good.
 starts from the keys and changes only the gapped bones' rotations (and locations) on the gap
 frames:
 
-- ``hermite``: each channel a cubic from the key before the gap to the key after it, leaving and
-  arriving with the velocities the keys show (damped on gaps over ``HERMITE_SECONDS``);
+- ``hermite`` (a baseline: Bezier keys on Blender's F-curves): each channel a cubic from the key
+  before the gap to the key after it, leaving and arriving with the velocities the keys show
+  (damped on gaps over ``HERMITE_SECONDS``). The fills of the project's own (``auto``'s
+  candidates, ``knn``'s start) take the same cubic on the rotations instead of their Euler
+  channels, which race near gimbal lock (:func:`~.rig.hermite_rotations`);
 - ``match``: motion matching in rotation space (:func:`~.matching.match_windows`): the
   knowledge-base windows of consecutive poses whose bone rotations move most like the take's
   over the gap and half a second either side (where the gapped bones are keyed too), matched
@@ -69,7 +72,7 @@ from .motion import Motion, blend_into_gaps, gap_runs, skeleton_limbs, widened
 from .posing import best_rotation, child_handles, forward, order_bones, rotation_between, \
     solve_pose, tail_handles
 from .rig import aligned_turns, basis_matrices, basis_turns, hermite_channels, \
-    interpolate_channels, regress_channels
+    hermite_rotations, interpolate_channels, regress_channels
 from . import stacking
 
 BONE_METHODS = ("auto", "knn", "match", "regress", "interp", "hermite", "slerp", "positions")
@@ -269,7 +272,7 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     elif method == "slerp":
         basis = _slerp(seen, gaps, moves)
     elif method == "hermite":
-        basis = job.hermite(channels, location, gaps, seen)
+        basis = job.hermite(channels, location, gaps, seen, on_channels=True)
     elif method == "regress":
         basis = job.regress(channels, location, gaps, seen)
     elif method == "positions":
@@ -509,13 +512,19 @@ class _Job:
                         "not where the body goes)")
         return gaps & ~roots
 
-    def hermite(self, channels, location, gaps, base):
-        """``hermite``'s basis matrices; ``base``: those of ``channels`` and ``location``."""
+    def hermite(self, channels, location, gaps, base, on_channels=False):
+        """``hermite``'s basis matrices; ``base``: those of ``channels`` and ``location``. The
+        cubic turns the rotations (:func:`~.rig.hermite_rotations`); ``on_channels``: each
+        rotation channel a cubic of its own, as Bezier keys on Blender's F-curves would do it
+        (the baseline, which near gimbal lock swings a bone by radians)."""
         moving = gaps & self.moves
         damping = HERMITE_SECONDS * self.fps
-        return basis_matrices(self.rig, hermite_channels(channels, gaps, damping),
-                              hermite_channels(location, moving, damping), base,
-                              gaps.any(axis=0))
+        rotation = hermite_channels(channels, gaps, damping) if on_channels else channels
+        out = basis_matrices(self.rig, rotation, hermite_channels(location, moving, damping),
+                             base, gaps.any(axis=0))
+        if not on_channels:
+            out[..., :3, :3] = hermite_rotations(out[..., :3, :3], gaps, damping)
+        return out
 
     def regress(self, channels, location, gaps, base, lags=REGRESS_LAGS, kernel=False):
         """Each gapped bone (not a root) as the rest of the body says (``regress``; with

@@ -348,6 +348,34 @@ def hermite_channels(values, gaps, damping=None):
     return out
 
 
+def hermite_rotations(turns, gaps, damping=None):
+    """:func:`hermite_channels` for rotations (frames, bones, 3, 3) that hold across each gap
+    what the F-curves show (the interpolation of its keys), done on the rotations rather than
+    on their channels: the interpolation, turned on each frame by a cubic (as a rotation
+    vector, zero at both keys) that makes it leave the key before the gap and reach the key
+    after it with the angular velocities those keys show (one-frame steps). Near an Euler
+    angle's gimbal lock a bone's channels race while the bone itself turns slowly; their
+    velocities carried into a gap turned bones by radians (docs/METHOD_NOTES.md, session 37).
+    ``damping`` as there."""
+    out = np.array(turns, dtype=float)
+    frames = len(out)
+    for b in np.flatnonzero(gaps.any(axis=0)):
+        for a, e in _runs(gaps[:, b]):
+            if a < 2 or e > frames - 3 or gaps[a - 2, b] or gaps[e + 2, b]:
+                continue
+            span = e - a + 2
+            s = ((np.arange(a, e + 1) - (a - 1)) / span)[:, None]
+            scale = span if damping is None else min(span, damping)
+            r = Rotation.from_matrix(out[[a - 2, a - 1, a, e, e + 1, e + 2], b])
+            steps = (r[[0, 1, 3, 4]].inv() * r[[1, 2, 4, 5]]).as_rotvec()  # keys, path, path, keys
+            d0 = steps[0] * scale - steps[1] * span  # as the channels' cubic departs from the line
+            d1 = steps[3] * scale - steps[2] * span
+            turn = (s ** 3 - 2 * s ** 2 + s) * d0 + (s ** 3 - s ** 2) * d1
+            out[a:e + 1, b] = (Rotation.from_matrix(out[a:e + 1, b])
+                               * Rotation.from_rotvec(turn)).as_matrix()
+    return out
+
+
 def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=False):
     """Like :func:`interpolate_channels`, but each gap with a key on both sides takes what the
     rest of the body says of the bone: a ridge regression of its channels on the channels of
