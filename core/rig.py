@@ -333,19 +333,26 @@ def hermite_channels(values, gaps, damping=None):
     ``damping`` (frames), the velocities of a gap spanning more frames are scaled by
     ``damping / span``: a long gap does not carry the end velocities far (overshoot)."""
     out = interpolate_channels(values, gaps)
-    frames = len(out)
+    for b, a, e, s, span, scale in _cubic_spans(gaps, damping):
+        x0, x1 = out[a - 1, b], out[e + 1, b]
+        v0, v1 = (x0 - out[a - 2, b]) * scale, (out[e + 2, b] - x1) * scale
+        out[a:e + 1, b] = ((2 * s ** 3 - 3 * s ** 2 + 1) * x0 + (s ** 3 - 2 * s ** 2 + s) * v0
+                           + (3 * s ** 2 - 2 * s ** 3) * x1 + (s ** 3 - s ** 2) * v1)
+    return out
+
+
+def _cubic_spans(gaps, damping):
+    """Each gap the cubics fill (two keys on both sides): ``(bone, first, last, s, span,
+    scale)``, ``s`` (frames, 1) its frames' place between the keys either side (0-1), ``span``
+    the frames between those keys, ``scale`` the velocities' (``span``, damped)."""
+    frames = len(gaps)
     for b in np.flatnonzero(gaps.any(axis=0)):
         for a, e in _runs(gaps[:, b]):
             if a < 2 or e > frames - 3 or gaps[a - 2, b] or gaps[e + 2, b]:
                 continue
             span = e - a + 2
-            s = ((np.arange(a, e + 1) - (a - 1)) / span)[:, None]
-            x0, x1 = out[a - 1, b], out[e + 1, b]
-            scale = span if damping is None else min(span, damping)
-            v0, v1 = (x0 - out[a - 2, b]) * scale, (out[e + 2, b] - x1) * scale
-            out[a:e + 1, b] = ((2 * s ** 3 - 3 * s ** 2 + 1) * x0 + (s ** 3 - 2 * s ** 2 + s) * v0
-                               + (3 * s ** 2 - 2 * s ** 3) * x1 + (s ** 3 - s ** 2) * v1)
-    return out
+            yield (b, a, e, ((np.arange(a, e + 1) - (a - 1)) / span)[:, None], span,
+                   span if damping is None else min(span, damping))
 
 
 def hermite_rotations(turns, gaps, damping=None):
@@ -358,21 +365,14 @@ def hermite_rotations(turns, gaps, damping=None):
     velocities carried into a gap turned bones by radians (docs/METHOD_NOTES.md, session 37).
     ``damping`` as there."""
     out = np.array(turns, dtype=float)
-    frames = len(out)
-    for b in np.flatnonzero(gaps.any(axis=0)):
-        for a, e in _runs(gaps[:, b]):
-            if a < 2 or e > frames - 3 or gaps[a - 2, b] or gaps[e + 2, b]:
-                continue
-            span = e - a + 2
-            s = ((np.arange(a, e + 1) - (a - 1)) / span)[:, None]
-            scale = span if damping is None else min(span, damping)
-            r = Rotation.from_matrix(out[[a - 2, a - 1, a, e, e + 1, e + 2], b])
-            steps = (r[[0, 1, 3, 4]].inv() * r[[1, 2, 4, 5]]).as_rotvec()  # keys, path, path, keys
-            d0 = steps[0] * scale - steps[1] * span  # as the channels' cubic departs from the line
-            d1 = steps[3] * scale - steps[2] * span
-            turn = (s ** 3 - 2 * s ** 2 + s) * d0 + (s ** 3 - s ** 2) * d1
-            out[a:e + 1, b] = (Rotation.from_matrix(out[a:e + 1, b])
-                               * Rotation.from_rotvec(turn)).as_matrix()
+    for b, a, e, s, span, scale in _cubic_spans(gaps, damping):
+        r = Rotation.from_matrix(out[[a - 2, a - 1, a, e, e + 1, e + 2], b])
+        steps = (r[[0, 1, 3, 4]].inv() * r[[1, 2, 4, 5]]).as_rotvec()  # keys, path, path, keys
+        d0 = steps[0] * scale - steps[1] * span  # as the channels' cubic departs from the line
+        d1 = steps[3] * scale - steps[2] * span
+        turn = (s ** 3 - 2 * s ** 2 + s) * d0 + (s ** 3 - s ** 2) * d1
+        out[a:e + 1, b] = (Rotation.from_matrix(out[a:e + 1, b])
+                           * Rotation.from_rotvec(turn)).as_matrix()
     return out
 
 
