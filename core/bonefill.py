@@ -624,8 +624,8 @@ class _Job:
                                     seen)
             truth = self.world(seen)
             if stack:  # each copy stacked with weights its own gap's copies had no part in
-                table, alone, long_table = self._stack_tables(tried, truth, copies, fills)
-                of_copy = {(b, start): alone[i] for i, b, start, _ in copies}
+                table, by_gap, long_table = self._stack_tables(tried, truth, copies, fills)
+                of_copy = {(b, start): by_gap[i] for i, b, start, _ in copies}
                 tried["stack"] = self._stacked(tried, gaps | probe, self.stack_fills,
                                                lambda b, a: of_copy.get((b, a), table))
                 names = names + ("stack",)
