@@ -150,7 +150,7 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, sou
     interpolation, where it took a fill that the copies judged it is that far better on them.
     The same bars without a knowledge base (a rig no starter one fits: the take's own fills,
     judged on the same copies; the long gaps, too long for copies in this short take, halfway
-    to the take's own regression): measured 7.6 and 67.4 mm, 1 of 8 and 0 of 2 gaps worse."""
+    to the take's own regression): measured 7.5 and 67.4 mm, 1 of 8 and 0 of 2 gaps worse."""
     daz_kb = request.getfixturevalue("daz_kb") if source == "knowledge base" else None
     rig, channels, location, fps = walk
     truth = basis_matrices(rig, channels, location)
