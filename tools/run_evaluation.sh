@@ -66,3 +66,8 @@ $MG evaluate --protocol bones --quiet --skip-frames 6 --no-kb --methods interp a
 $MG evaluate --protocol bones --quiet --no-kb --methods interp auto \
   --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
   --json docs/results/bones_amc31_no_kb.json
+$MG evaluate --protocol markers --quiet --fps 120 --no-kb --methods auto rigid pattern \
+  --test "$D"/cmu/c3d/85_02.c3d --json docs/results/markers_cmu_no_kb.json
+$MG evaluate --protocol markers --quiet --fps 120 --no-kb --methods auto rigid pattern \
+  --test "$D"/hdm05/c3d/HDM_bd_05-01_01_120.c3d "$D"/hdm05/c3d/HDM_dg_06-03_03_120.c3d \
+         "$D"/hdm05/c3d/HDM_mm_01-02_03_120.c3d --json docs/results/markers_hdm05_no_kb.json
