@@ -315,9 +315,10 @@ def test_the_cubic_turns_the_bone_not_its_channels_near_gimbal_lock(data_dir, wa
     """05_05: the right shoulder's ZXY channels pass close to gimbal lock (X near -90 degrees)
     just after a 30-frame gap, where they race (0.35 rad a frame) while the shoulder turns
     slowly. The cubic on the channels carried that speed into the gap and swung the arm by
-    metres (measured 606 mm RMS, Blender's interpolation 67 mm); the cubic on the rotations
-    stays within twice the interpolation (measured 122 mm) and keeps the keys. Away from gimbal
-    lock (the walk's shin and forearm) the two cubics agree (measured within 0.3 mm)."""
+    more than half a metre (measured 606 mm RMS, Blender's interpolation 67 mm); the cubic on
+    the rotations stays within twice the interpolation (measured 122 mm) and keeps the keys.
+    Away from gimbal lock (the walk's shin and forearm) the two cubics agree (measured within
+    0.3 mm)."""
     def errors(take, bone, first, last):
         rig, channels, location, fps = take
         gaps = np.zeros(channels.shape[:2], bool)
