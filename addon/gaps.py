@@ -186,8 +186,9 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
 
     Armatures with ``knn`` or ``auto`` are filled in the space of their gaps
     (:func:`~..core.bonefill.fill_bones`, method ``auto``): only the gapped bones' rotations
-    change, and only on gaps where the knowledge base refills copies of the gap better than
-    Blender's own interpolation; other methods fill joint positions and solve the bones.
+    change, and only on gaps where the fill (from the knowledge base, or the take alone where
+    none fits) refills copies of the gap better than Blender's own interpolation; other methods
+    fill joint positions and solve the bones.
     Without a knowledge base (``kb`` None), methods that use one take the starter knowledge
     base whose names match the take (:func:`~..core.kb.starter_kb`); where none fits, ``auto``
     fills from the take alone, and the others say why none fits."""

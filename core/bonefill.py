@@ -598,12 +598,13 @@ class _Job:
         copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
         stack = rotations and bool(copies)  # the weights come from the copies
         runs = gap_runs(gaps)
-        choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps else names[1],
-                   1.0) for _, a, e in runs]
         if alone:  # nothing to judge by: the cubic on short gaps, part of the way to the
             # take's own regression on long ones
             choice = [("hermite", 1.0) if (e - a + 1) < LONG_GAP * self.fps
                       else ("regress_kernel", TAKE_ALONE_UNJUDGED) for _, a, e in runs]
+        else:
+            choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps
+                       else names[1], 1.0) for _, a, e in runs]
         estimates = [float("nan")] * len(runs)
         longest = [rotations and (e - a + 1) >= LONG_STACK * self.fps
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
