@@ -193,8 +193,7 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
     base whose names match the take (:func:`~..core.kb.starter_kb`); where none fits, ``auto``
     fills from the take alone, and the others say why none fits."""
     from ..core import bonefill
-    from ..core.fill import NEEDS_KB, TAKE_ALONE, USES_KB, fill
-    from ..core.kb import starter_kb
+    from ..core.fill import TAKE_ALONE, fill, kb_for_take
     from ..core.recover import KnnSettings
 
     plans = []
@@ -218,18 +217,14 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
         if take.kind == "markers":
             write &= missing
         plan = FillPlan(owner.name, take, write, missing, ids, every, kb=kb)
-        if method in USES_KB and kb is None:
-            try:
-                path, plan.kb = starter_kb(list(take.names))
-            except GapFillError as exc:
-                if method in NEEDS_KB:
-                    raise GapFillError(f"'{owner.name}': {exc}; or choose a knowledge base "
-                                       "(Mocap tab > Knowledge base)") from None
-                alone = bonefill.TAKE_ALONE if take.kind == "armature" else TAKE_ALONE
-                plan.messages.append(f"{exc}; until then, {alone}")
-            else:
-                plan.messages.append(f"no knowledge base chosen: the starter {path.name} "
-                                     f"({plan.kb.size} poses of CMU motion)")
+        alone = bonefill.TAKE_ALONE if take.kind == "armature" else TAKE_ALONE
+        try:
+            plan.kb, note = kb_for_take(take.names, method, kb, alone,
+                                        choose="Mocap tab > Knowledge base")
+        except GapFillError as exc:
+            raise GapFillError(f"'{owner.name}': {exc}") from None
+        if note:
+            plan.messages.append(("no knowledge base chosen: " if plan.kb else "") + note)
         plans.append(plan)
     if not plans:
         raise GapFillError("no gaps to fill: detect or mark gaps first"

@@ -108,25 +108,15 @@ _KBS = {}
 
 
 def _knowledge_base(path, names, method):
-    """The knowledge base for a take, loaded once per process: the file given, or the starter
-    one that fits the take's names; None for methods that use none, and for ``auto`` where no
-    starter one fits (it fills from the take alone)."""
-    from .fill import NEEDS_KB, USES_KB
-    from .kb import load_kb, starter_kb
+    """The knowledge base for a take, the file given loaded once per process, else as
+    :func:`~.fill.kb_for_take` finds it (the starter one that fits, None where the take fills
+    alone)."""
+    from .fill import USES_KB, kb_for_take
+    from .kb import load_kb
 
-    if method not in USES_KB:
-        return None
-    if path:
-        if path not in _KBS:
-            _KBS[path] = load_kb(path)
-        return _KBS[path]
-    try:
-        starter, kb = starter_kb(names)
-    except GapFillError:
-        if method in NEEDS_KB:
-            raise
-        return None  # auto fills from the take alone
-    return _KBS.setdefault(str(starter), kb)
+    if path and method in USES_KB and path not in _KBS:
+        _KBS[path] = load_kb(path)
+    return kb_for_take(names, method, _KBS.get(path))[0]
 
 
 def run_take(task):

@@ -146,8 +146,8 @@ def cmd_kb_build(args):
 
 
 def cmd_fill(args):
-    from .fill import NEEDS_KB, TAKE_ALONE, USES_KB, fill
-    from .kb import load_kb, starter_kb
+    from .fill import fill, kb_for_take
+    from .kb import load_kb
     from .recover import KnnSettings
 
     src, dst = Path(args.input), Path(args.output)
@@ -159,19 +159,10 @@ def cmd_fill(args):
             raise GapFillError(f"--gap-report {args.gap_report}: name a .csv or .json file")
         _check_output(Path(args.gap_report), args.force, src)
     motion = _read(src, args)
-    kb = load_kb(args.kb) if args.kb else None
-    if kb is None and args.method in USES_KB:
-        try:
-            path, kb = starter_kb(motion.names)
-        except GapFillError as exc:
-            if args.method in NEEDS_KB:
-                raise GapFillError(f"method {args.method!r} needs a knowledge base: -k KB.npz "
-                                   f"(make one with 'mocap-gapfill kb build'); {exc}; without "
-                                   "one, --method auto fills from the take alone") from None
-            _report(f"no -k given: {exc}; until then, {TAKE_ALONE}")
-        else:
-            _report(f"no -k given: the starter knowledge base {path.name} ({kb.size} poses of "
-                    "CMU motion)")
+    kb, note = kb_for_take(motion.names, args.method, load_kb(args.kb) if args.kb else None,
+                           choose="-k KB.npz; make one with 'mocap-gapfill kb build'")
+    if note:
+        _report(f"no -k given: {note}")
     progress = Progress(args.quiet)
     out, accounts = fill(motion, args.method, kb=kb, progress=progress, report=_report,
                          settings=KnnSettings(k=args.k, device=args.device),

@@ -7,7 +7,7 @@ import numpy as np
 
 from . import baselines
 from .errors import GapFillError
-from .kb import match_names
+from .kb import match_names, starter_kb
 from .motion import gap_runs
 
 METHODS = ("knn", "auto", "linear", "spline", "local-spline", "rigid", "pattern", "svt", "pca",
@@ -128,6 +128,25 @@ REVIEW_FIRST = 3
 def worst_first(accounts):
     """The gaps' accounts that have an estimate, the largest first: the order to review them."""
     return sorted((a for a in accounts if np.isfinite(a.estimate)), key=lambda a: -a.estimate)
+
+
+def kb_for_take(names, method, kb=None, alone=TAKE_ALONE, choose="-k KB.npz"):
+    """``(kb, note)``: the knowledge base a fill by ``method`` of a take with point or bone
+    ``names`` uses, and a line for the user where none was chosen. ``kb`` where given, None for
+    methods that use none; else the starter knowledge base that fits the names
+    (:func:`~.kb.starter_kb`), or where none fits None for ``auto`` (it fills from the take
+    alone, the note says so, ending with ``alone``), a :class:`GapFillError` for the methods
+    that need one (``choose``: how to give one)."""
+    if kb is not None or method not in USES_KB:
+        return kb, None
+    try:
+        path, kb = starter_kb(list(names))
+    except GapFillError as exc:
+        if method in NEEDS_KB:
+            raise GapFillError(f"method {method!r} needs a knowledge base ({choose}); {exc}; "
+                               "without one, 'auto' fills from the take alone") from None
+        return None, f"{exc}; until then, {alone}"
+    return kb, f"the starter knowledge base {path.name} ({kb.size} poses of CMU motion)"
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,

@@ -352,6 +352,9 @@ STARTER_DIR = Path(__file__).resolve().parents[1] / "sample_scenes"
 STARTER_KBS = ("cmu_daz43_kb.npz", "cmu_markers41_kb.npz", "cmu_asf31_kb.npz")
 
 
+_STARTERS = {}
+
+
 def starter_kb(names):
     """``(path, kb)``: the starter knowledge base that shares the most of ``names`` and enough of
     them to fill (:func:`match_names`); :class:`GapFillError` naming what the closest lacks
@@ -360,7 +363,9 @@ def starter_kb(names):
     for path in (STARTER_DIR / name for name in STARTER_KBS):
         if not path.is_file():
             continue
-        kb = load_kb(path)
+        if path not in _STARTERS:  # loaded once per process (a batch asks per take)
+            _STARTERS[path] = load_kb(path)
+        kb = _STARTERS[path]
         try:
             common, _ = match_names(kb, names)
         except GapFillError as exc:

@@ -8,7 +8,8 @@ import pytest
 from mocap_gapfill.core.errors import GapFillError, ParseError
 from mocap_gapfill.core.evaluate import (complete_take, kb_without, punch_gaps, rmse_mm,
                                          subject_of, with_gaps)
-from mocap_gapfill.core.fill import BASELINES, DEFAULT_METHOD, METHODS, fill, validation_gaps
+from mocap_gapfill.core.fill import (BASELINES, DEFAULT_METHOD, METHODS, TAKE_ALONE, fill,
+                                     kb_for_take, validation_gaps)
 from mocap_gapfill.core.io import read_motion
 from mocap_gapfill.core.kb import build_kb, load_kb, resample
 from mocap_gapfill.core.normalize import find_reference, frames_of, normalize
@@ -817,13 +818,14 @@ def test_energy_and_gradient_match_the_terms_written_out(daz_kb, walk, monkeypat
 
 def test_starter_knowledge_bases(data_dir, tmp_path):
     """The KBs shipped in sample_scenes/: compact (float16 within 0.5 mm), picked by the take's
-    names, and a clear message where none fits."""
+    names (each loaded once), and a clear message where none fits."""
     from mocap_gapfill.core.kb import STARTER_DIR, STARTER_KBS, starter_kb
 
     sizes = [(STARTER_DIR / name).stat().st_size for name in STARTER_KBS]
     assert sum(sizes) < 8e6, sizes
     bvh = read_motion(data_dir / DAZ / "13/13_30.bvh.gz", skip_frames=6)
     c3d = read_motion(data_dir / "cmu/c3d/85_02.c3d")
+    full = build_kb([data_dir / "cmu/c3d/85_02.c3d"], fps=30)
     path, kb = starter_kb(bvh.names)
     assert path.name == "cmu_daz43_kb.npz" and set(kb.names) == set(bvh.names)
     assert kb.poses.dtype == np.float32 and kb.size > 10000
@@ -836,7 +838,19 @@ def test_starter_knowledge_bases(data_dir, tmp_path):
     assert kb.turns is not None and "lhumerus" in kb.bones  # for the armature fill
     with pytest.raises(GapFillError, match="no starter knowledge base fits.*Kopf"):
         starter_kb(["Kopf", "Hals", "Hand", "Fuss"])
-    full = build_kb([data_dir / "cmu/c3d/85_02.c3d"], fps=30)
+    assert starter_kb(amc.names)[1] is kb  # loaded once per process: a batch asks per take
+    # the one rule of fill, batch and the add-on where no knowledge base was chosen
+    assert kb_for_take(amc.names, "auto")[0] is kb
+    assert "starter knowledge base cmu_asf31_kb.npz" in kb_for_take(amc.names, "knn")[1]
+    chosen, note = kb_for_take(amc.names, "auto", kb=full)
+    assert chosen is full and note is None
+    assert kb_for_take(["Kopf", "Hals"], "linear") == (None, None)
+    alone, note = kb_for_take(["Kopf", "Hals"], "auto")
+    assert alone is None and note.startswith("no starter knowledge base fits")
+    assert note.endswith("until then, " + TAKE_ALONE)
+    with pytest.raises(GapFillError, match=r"'knn' needs a knowledge base \(-k KB.npz\); no "
+                       "starter knowledge base fits"):
+        kb_for_take(["Kopf", "Hals"], "knn")
     full.save(tmp_path / "compact.npz", compact=True)
     np.testing.assert_allclose(load_kb(tmp_path / "compact.npz").poses, full.poses, atol=5e-4)
 
