@@ -1,0 +1,148 @@
+"""What the armature default loses (issue 14; docs/METHOD_NOTES.md, session 38): the bones
+protocol's gaps on the tuning takes of ``tools/tune_bones.py`` (never a test take; each subject
+out of a knowledge base that holds no test take), filled by ``auto``; per gap how it was filled
+(:class:`~mocap_gapfill.core.bonefill.GapChoice`), how far it moved the joints from Blender's
+interpolation, the interpolation's error on the gap's copies (the copies ``auto`` judges by), the
+joint speed at the gap's keys, and the error of the fill moved ``t`` = 0, 0.05, ..., 1 of the way
+from the interpolation's joints to its own (t = 1: the fill; linear in the joints), so that a
+veto or cap can be scored without filling again.
+
+    python tools/lost_gaps.py OUT.jsonl            # run (the Daz tuning takes; AMC=1: ASF/AMC;
+                                                   # TAKES=01_08,02_05: only those)
+    python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, session 38
+"""
+
+import json
+import os
+import sys
+from collections import Counter, defaultdict
+
+import numpy as np
+
+from mocap_gapfill.core.bonefill import AUTO_COPIES, COPY_MARGIN, fill_bones, gap_copies
+from mocap_gapfill.core.evaluate import (BONE_SETTINGS, gappable_bones, kb_without,
+                                         punch_bone_gaps, subject_of)
+from mocap_gapfill.core.io import read_rig_take
+from mocap_gapfill.core.kb import build_kb
+from mocap_gapfill.core.motion import gap_runs
+from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
+from tune_bones import AMC, AMC_TEST_TAKES, AMC_TUNING, DAZ, TEST_TAKES
+
+DAZ_TUNING = "01_08 02_05 03_02 05_10 06_03 07_05 08_02 09_05 10_03 11_01 12_03 13_10".split()
+STEPS = np.linspace(0.0, 1.0, 21)
+
+
+def run(out):
+    amc = bool(os.environ.get("AMC"))
+    if amc:
+        full = build_kb([AMC], fps=60.0, exclude=[f"*{t}.amc" for t in AMC_TEST_TAKES])
+        paths = [AMC / f"{t}.amc" for t in AMC_TUNING]
+    else:
+        full = build_kb([DAZ], fps=60.0, skip_frames=6,
+                        exclude=[f"*{t}.bvh*" for t in TEST_TAKES])
+        paths = [DAZ / t[:2] / f"{t}.bvh.gz" for t in DAZ_TUNING]
+    only = os.environ.get("TAKES")
+    paths = [p for p in paths if not only or any(t in p.name for t in only.split(","))]
+    with open(out, "w") as sink:
+        for path in paths:
+            rig, channels, location, fps = read_rig_take(path, skip_frames=0 if amc else 6)
+            kb = kb_without(full, subject_of(path))
+            truth = rig.joints(basis_matrices(rig, channels, location))
+            below = rig.placed_by()
+            for n, l in BONE_SETTINGS:
+                label = f"n={n},l={l}"
+                rng = np.random.default_rng([0, *label.encode()])  # evaluate's gaps
+                gaps = np.zeros(channels.shape[:2], dtype=bool)
+                punched = punch_bone_gaps(len(channels), gappable_bones(rig), (n, l), rng)
+                gaps[:, :punched.shape[1]] = punched
+                if not gaps.any():
+                    continue
+                seen = interpolate_channels(channels, gaps)
+                shown = rig.joints(basis_matrices(rig, seen, location))
+                filled, choices = fill_bones(rig, seen, location, gaps, fps, kb=kb,
+                                             return_choices=True)
+                filled = rig.joints(filled)
+                copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
+                probe = np.zeros_like(gaps)
+                for _, b, start, length in copies:
+                    probe[start:start + length, b] = True
+                on_copies = rig.joints(basis_matrices(
+                    rig, interpolate_channels(channels, probe), location))
+                for i, ((b, a, e), choice) in enumerate(zip(gap_runs(gaps), choices)):
+                    joints = below[b]
+                    if not joints.any():
+                        continue
+                    rows = slice(a, e + 1)
+                    s, f, t = shown[rows, joints], filled[rows, joints], truth[rows, joints]
+                    own = [c for c in copies if c[0] == i]
+                    copy_mm = [1000 * _rms(on_copies[c[2]:c[2] + c[3], joints]
+                                           - truth[c[2]:c[2] + c[3], joints]) for c in own]
+                    speed = [1000 * _rms(shown[k + 1, joints] - shown[k, joints])
+                             for k in (a - 2, e + 1) if k >= 0 and k + 1 < len(shown)]
+                    sink.write(json.dumps({
+                        "take": path.name, "setting": label, "l": l, "bone": rig.names[b],
+                        "first": int(a), "frames": int(e - a + 1), "joints": int(joints.sum()),
+                        "method": choice.method, "share": choice.share,
+                        "estimate": choice.estimate, "consensus": choice.consensus,
+                        "departure_mm": 1000 * _rms(f - s),
+                        "copies_interp_mm": float(np.mean(copy_mm)) if copy_mm else None,
+                        "key_speed_mm": float(np.mean(speed)) if speed else None,
+                        "curve_mm": [1000 * _rms(s + step * (f - s) - t) for step in STEPS],
+                    }) + "\n")
+                print(path.name, label, flush=True)
+
+
+def _rms(x):
+    return float(np.sqrt(np.mean(np.sum(x ** 2, axis=-1))))
+
+
+def score(path):
+    rows = [json.loads(line) for line in open(path)]
+    by_setting = defaultdict(list)
+    for r in rows:
+        by_setting[r["take"], r["setting"]].append(r)
+    # the interpolation's error the gap's length and key speed predict (log fit)
+    fit = [r for r in rows if r["key_speed_mm"] is not None and r["curve_mm"][0] > 0.5]
+    x = np.c_[np.ones(len(fit)), np.log([r["key_speed_mm"] + 0.3 for r in fit]),
+              np.log([r["l"] for r in fit])]
+    coef = np.linalg.lstsq(x, np.log([r["curve_mm"][0] for r in fit]), rcond=None)[0]
+
+    def predicted(r):
+        speed = r["key_speed_mm"] if r["key_speed_mm"] is not None else 3.0
+        return np.exp(coef @ [1.0, np.log(speed + 0.3), np.log(r["l"])])
+
+    def calm(c, narrow=False):
+        def rule(r):
+            if not r["copies_interp_mm"] or (narrow and not r["estimate"] > 0.7):
+                return 1.0
+            return min(1.0, predicted(r) / r["copies_interp_mm"] / c)
+        return rule
+
+    rules = {"as is": lambda r: 1.0,
+             "departure <= copies' interp error": lambda r: 1.0 if not r["copies_interp_mm"]
+             else min(1.0, r["copies_interp_mm"] / max(r["departure_mm"], 1e-9)),
+             **{f"calm gap, c = {c}": calm(c) for c in (0.5, 1, 2)},
+             "calm gap, c = 2, estimate > 0.7": calm(2, narrow=True)}
+    for name, rule in rules.items():
+        ratios, lost = defaultdict(list), 0
+        for gaps in by_setting.values():
+            weight = np.array([r["frames"] * r["joints"] for r in gaps])
+            chosen = np.array([r["curve_mm"][int(round(20 * rule(r)))] for r in gaps])
+            interp = np.array([r["curve_mm"][0] for r in gaps])
+            lost += int(np.sum(chosen > 1.1 * interp + 2))
+            if (interp > 0).any():
+                ratios[gaps[0]["l"]].append(0.5 * np.log((weight * chosen ** 2).sum()
+                                                         / (weight * interp ** 2).sum()))
+        every = [v for values in ratios.values() for v in values]
+        print(f"{name:34s}", " / ".join(f"{np.exp(np.mean(ratios[l])):.3f}" for l in sorted(ratios)),
+              f"all {np.exp(np.mean(every)):.3f}, lost {lost} of {len(rows)}")
+    lost = [r for r in rows if r["curve_mm"][-1] > 1.1 * r["curve_mm"][0] + 2]
+    print("lost by fill:", dict(Counter(r["method"] for r in lost)))
+    print("lost by take:", dict(Counter(r["take"] for r in lost)))
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "--score":
+        score(sys.argv[2])
+    else:
+        run(sys.argv[1])
