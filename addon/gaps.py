@@ -216,15 +216,15 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
         missing = bridge.missing_points(take, every)
         if take.kind == "markers":
             write &= missing
-        plan = FillPlan(owner.name, take, write, missing, ids, every, kb=kb)
         alone = bonefill.TAKE_ALONE if take.kind == "armature" else TAKE_ALONE
         try:
-            plan.kb, note = kb_for_take(take.names, method, kb, alone,
-                                        choose="Mocap tab > Knowledge base")
+            used, note = kb_for_take(take.names, method, kb, alone,
+                                     choose="Mocap tab > Knowledge base")
         except GapFillError as exc:
             raise GapFillError(f"'{owner.name}': {exc}") from None
+        plan = FillPlan(owner.name, take, write, missing, ids, every, kb=used)
         if note:
-            plan.messages.append(("no knowledge base chosen: " if plan.kb else "") + note)
+            plan.messages.append(("no knowledge base chosen: " if used else "") + note)
         plans.append(plan)
     if not plans:
         raise GapFillError("no gaps to fill: detect or mark gaps first"
