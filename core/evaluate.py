@@ -272,11 +272,15 @@ def gappable_bones(rig):
             if p >= 0 and below[b].any() and not _SMALL.search(name)]
 
 
-def punch_bone_gaps(n_frames, candidates, setting, rng):
-    """(frames, bones) bool over ``max(candidates) + 1`` bones: every other stretch of ``l``
-    frames (the first one keyed) loses the keys of ``n`` random candidate bones."""
+def punch_bone_gaps(rig, n_frames, setting, seed=0):
+    """(frames, bones) bool: the bones protocol's gaps for ``setting`` ``(n, l)`` on a take of
+    ``rig``: every other stretch of ``l`` frames (the first one keyed) loses the keys of ``n``
+    random bones of :func:`gappable_bones`, drawn from ``seed`` and the setting's label (the
+    same gaps for every method and every run)."""
     n, l = setting
-    gaps = np.zeros((n_frames, max(candidates) + 1), dtype=bool)
+    rng = np.random.default_rng([seed, *f"n={n},l={l}".encode()])
+    candidates = gappable_bones(rig)
+    gaps = np.zeros((n_frames, len(rig.names)), dtype=bool)
     for s in range(l, n_frames - 1, 2 * l):
         gaps[s:min(s + l, n_frames - 1), rng.choice(candidates, n, replace=False)] = True
     return gaps
@@ -307,12 +311,8 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
         kb = None if full_kb is None else kb_without(full_kb, subject_of(test))
         knn = KnnSettings(k=None if k is None or kb is None else min(k, kb.size))
         truth = basis_matrices(rig, channels, location)
-        candidates = gappable_bones(rig)
         for label, setting in chosen:
-            rng = np.random.default_rng([seed, *label.encode()])
-            gaps = np.zeros(channels.shape[:2], dtype=bool)
-            punched = punch_bone_gaps(len(channels), candidates, setting, rng)
-            gaps[:, :punched.shape[1]] = punched
+            gaps = punch_bone_gaps(rig, len(channels), setting, seed)
             seen = interpolate_channels(channels, gaps)
             for method in methods:
                 start = time.perf_counter()

@@ -20,8 +20,8 @@ from collections import Counter, defaultdict
 import numpy as np
 
 from mocap_gapfill.core.bonefill import AUTO_COPIES, COPY_MARGIN, fill_bones, gap_copies
-from mocap_gapfill.core.evaluate import (BONE_SETTINGS, gappable_bones, kb_without,
-                                         punch_bone_gaps, subject_of)
+from mocap_gapfill.core.evaluate import (BONE_SETTINGS, kb_without, punch_bone_gaps,
+                                         subject_of)
 from mocap_gapfill.core.io import read_rig_take
 from mocap_gapfill.core.kb import build_kb
 from mocap_gapfill.core.motion import gap_runs
@@ -51,10 +51,7 @@ def run(out):
             below = rig.placed_by()
             for n, l in BONE_SETTINGS:
                 label = f"n={n},l={l}"
-                rng = np.random.default_rng([0, *label.encode()])  # evaluate's gaps
-                gaps = np.zeros(channels.shape[:2], dtype=bool)
-                punched = punch_bone_gaps(len(channels), gappable_bones(rig), (n, l), rng)
-                gaps[:, :punched.shape[1]] = punched
+                gaps = punch_bone_gaps(rig, len(channels), (n, l))
                 if not gaps.any():
                     continue
                 seen = interpolate_channels(channels, gaps)

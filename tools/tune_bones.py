@@ -28,8 +28,8 @@ import numpy as np
 
 from mocap_gapfill.core.bonefill import AUTO_COPIES, CANDIDATES, COPY_MARGIN, _Job, gap_copies, \
     halfway
-from mocap_gapfill.core.evaluate import (BONE_SETTINGS, gappable_bones, kb_without,
-                                         punch_bone_gaps, subject_of)
+from mocap_gapfill.core.evaluate import (BONE_SETTINGS, kb_without, punch_bone_gaps,
+                                         subject_of)
 from mocap_gapfill.core.io import read_rig_take
 from mocap_gapfill.core.kb import build_kb, load_kb
 from mocap_gapfill.core.motion import gap_runs
@@ -74,10 +74,7 @@ def main(out, names=CANDIDATES):
         truth = rig.joints(basis_matrices(rig, channels, location))
         for n, l in BONE_SETTINGS:
             label = f"n={n},l={l}"
-            rng = np.random.default_rng([0, *label.encode()])
-            gaps = np.zeros(channels.shape[:2], dtype=bool)
-            punched = punch_bone_gaps(len(channels), gappable_bones(rig), (n, l), rng)
-            gaps[:, :punched.shape[1]] = punched
+            gaps = punch_bone_gaps(rig, len(channels), (n, l))
             seen = interpolate_channels(channels, gaps)
             job = _Job(rig, fps, kb, rig.roots, np.eye(4), None, lambda f, m: None, None,
                        lambda m: None)
