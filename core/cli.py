@@ -248,19 +248,21 @@ def cmd_evaluate(args):
         raise GapFillError("give the knowledge base: --kb-sources PATH... or --kb KB.npz (or "
                            "--no-kb: auto from the take alone)" + (", one of them" if given else ""))
     progress = Progress(args.quiet)
-    if args.protocol == "bones":
+    if args.protocol in ("bones", "bone-ends"):
         from .bonefill import BONE_BASELINES, BONE_METHODS
         from .evaluate import evaluate_bones
 
         default, baselines = "auto", BONE_BASELINES
         unknown = sorted(set(args.methods or ()) - set(BONE_METHODS))
         if unknown:
-            raise GapFillError(f"protocol bones takes the methods {', '.join(BONE_METHODS)}")
+            raise GapFillError(f"protocol {args.protocol} takes the methods "
+                               f"{', '.join(BONE_METHODS)}")
         methods = args.methods or list(BONE_METHODS)
         results = evaluate_bones(args.test, args.kb_sources, methods, kb_fps=args.fps,
                                  seed=args.seed, k=args.k, skip_frames=args.skip_frames,
                                  settings=args.settings, exclude=args.exclude_kb or (),
-                                 kb_file=args.kb, progress=progress, report=_report)
+                                 kb_file=args.kb, progress=progress, report=_report,
+                                 ends=args.protocol == "bone-ends")
     else:
         default, baselines = DEFAULT_METHOD, BASELINES
         unknown = sorted(set(args.methods or ()) - set(METHODS))
@@ -391,12 +393,15 @@ def build_parser(extra=None):
 
     p = sub.add_parser("evaluate", help="accuracy of the methods on punched gaps in real data")
     p.add_argument("--protocol", required=True,
-                   choices=["joints", "markers", "bodyparts", "shortgaps", "realgaps", "bones"],
-                   help="shortgaps: dropouts of 3-24 frames; "
+                   choices=["joints", "markers", "bodyparts", "shortgaps", "endgaps", "realgaps",
+                            "bones", "bone-ends"],
+                   help="shortgaps: dropouts of 3-24 frames; endgaps: points missing for "
+                        "the first or last 3-120 frames; "
                         "realgaps: the gaps of real captures (--gap-sources) on complete takes; "
                         "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
                         "rate; methods auto, knn, match, regress, interp, hermite, slerp, "
-                        "positions")
+                        "positions; bone-ends: the same, bones keyless for the first or last "
+                        "15-240 frames")
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")
     p.add_argument("--kb-sources", nargs="+", default=[], metavar="PATH",
                    help="knowledge-base files/folders (the test subject is left out)")

@@ -8,6 +8,9 @@ Protocols:
 - ``shortgaps``: the dropouts of a few frames that most real captures have: random points lose
   ``l`` frames at random places (l in {3, 6, 12, 24} at the evaluation frame rate) until 5 % of
   the samples are gone;
+- ``endgaps``: the gaps takes start and end with (a marker not yet seen, or lost before the end):
+  a random ``ENDGAPS_RATE`` of the points lose their first ``l`` frames and as many others their
+  last ``l`` (l in {3, 12, 30, 60, 120} at the evaluation frame rate);
 - ``realgaps``: the gaps a real capture has (``gap_sources``: takes with gaps of their own, e.g.
   CMU 01_01.c3d), transplanted by point name onto the complete test take, the source's mask
   repeated in time where the test take is longer, so gap lengths and co-occurrence are real.
@@ -34,6 +37,8 @@ JOINT_SETTINGS = [(m, l) for m in (3, 6) for l in (15, 30, 60, 90, 120)]
 MARKER_RATES = (0.1, 0.2, 0.3)
 SHORT_GAPS = (3, 6, 12, 24)
 SHORT_GAPS_RATE = 0.05
+END_GAPS = (3, 12, 30, 60, 120)
+ENDGAPS_RATE = 0.15
 BODY_PARTS = ("left_arm", "right_arm", "left_leg", "right_leg", "upper_body", "lower_body",
               "left_side", "right_side")
 _ARM = re.compile(r"(arm|hand|wrist|elbow|shoulder|sho|collar|clavicle|humerus|radius|finger|"
@@ -105,6 +110,11 @@ def punch_gaps(n_frames, n_points, protocol, setting, rng, names=None):
         for _ in range(max(1, int(round(SHORT_GAPS_RATE * n_frames * n_points / setting)))):
             s = rng.integers(1, n_frames - setting - 1)
             miss[s:s + setting, rng.integers(n_points)] = True
+    elif protocol == "endgaps":
+        count = max(1, int(round(ENDGAPS_RATE * n_points)))
+        points = rng.permutation(n_points)
+        miss[:setting, points[:count]] = True
+        miss[n_frames - setting:, points[count:2 * count]] = True
     elif protocol == "realgaps":
         miss = real_gaps(setting, names, n_frames)
     else:
@@ -137,6 +147,8 @@ def settings_of(protocol, gap_sources=()):
         return [(f"part={p}", p) for p in BODY_PARTS]
     if protocol == "shortgaps":
         return [(f"l={l}", l) for l in SHORT_GAPS]
+    if protocol == "endgaps":
+        return [(f"l={l}", l) for l in END_GAPS]
     if protocol == "realgaps":
         if not gap_sources:
             raise GapFillError("protocol realgaps needs takes with real gaps (--gap-sources)")
@@ -272,24 +284,34 @@ def gappable_bones(rig):
             if p >= 0 and below[b].any() and not _SMALL.search(name)]
 
 
-def punch_bone_gaps(rig, n_frames, setting, seed=0):
+def punch_bone_gaps(rig, n_frames, setting, seed=0, ends=False):
     """(frames, bones) bool: the bones protocol's gaps for ``setting`` ``(n, l)`` on a take of
     ``rig``: every other stretch of ``l`` frames (the first one keyed) loses the keys of ``n``
     random bones of :func:`gappable_bones`, drawn from ``seed`` and the setting's label (the
-    same gaps for every method and every run)."""
+    same gaps for every method and every run). ``ends`` (protocol ``bone-ends``): instead, ``n``
+    random bones lose their first ``l`` frames and ``n`` others their last ``l``: a take that
+    starts or stops with a broken bone, where Blender holds the one key."""
     n, l = setting
-    rng = np.random.default_rng([seed, *f"n={n},l={l}".encode()])
+    label = f"{'ends,' if ends else ''}n={n},l={l}"
+    rng = np.random.default_rng([seed, *label.encode()])
     candidates = gappable_bones(rig)
     gaps = np.zeros((n_frames, len(rig.names)), dtype=bool)
+    if ends:
+        bones = rng.choice(candidates, 2 * n, replace=False)
+        gaps[:l, bones[:n]] = True
+        gaps[n_frames - l:, bones[n:]] = True
+        return gaps
     for s in range(l, n_frames - 1, 2 * l):
         gaps[s:min(s + l, n_frames - 1), rng.choice(candidates, n, replace=False)] = True
     return gaps
 
 
 def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip_frames=0,
-                   settings=None, exclude=(), kb_file=None, progress=None, report=None):
-    """Protocol ``bones``: rotation gaps on armature takes at their own frame rate, every method
-    of :data:`~.bonefill.BONE_METHODS` on identical gaps, the test subject out of the KB.
+                   settings=None, exclude=(), kb_file=None, progress=None, report=None,
+                   ends=False):
+    """Protocol ``bones`` (``ends``: ``bone-ends``, gaps at the clip's ends,
+    :func:`punch_bone_gaps`): rotation gaps on armature takes at their own frame rate, every
+    method of :data:`~.bonefill.BONE_METHODS` on identical gaps, the test subject out of the KB.
 
     Scores: :func:`bone_errors`. A method that cannot fill a take-setting (a
     :class:`GapFillError`) is reported and scored inf, with the message under ``error``, as in
@@ -312,7 +334,7 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
         knn = KnnSettings(k=None if k is None or kb is None else min(k, kb.size))
         truth = basis_matrices(rig, channels, location)
         for label, setting in chosen:
-            gaps = punch_bone_gaps(rig, len(channels), setting, seed)
+            gaps = punch_bone_gaps(rig, len(channels), setting, seed, ends)
             seen = interpolate_channels(channels, gaps)
             for method in methods:
                 start = time.perf_counter()

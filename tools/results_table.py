@@ -59,7 +59,7 @@ def table(path):
     ours = [m for m in methods if m not in baselines]
     second = "angle_deg" if "angle_deg" in rows[0] else "rmse_all_mm"
     # armature gaps: also against doing nothing (Blender's interpolation), gap by gap
-    bones = payload["protocol"] == "bones" and "interp" in methods
+    bones = payload["protocol"] in ("bones", "bone-ends") and "interp" in methods
     out = [f"### {Path(path).stem}: protocol `{payload['protocol']}`, {payload.get('fps')} fps, "
            f"seed {payload.get('seed')}",
            f"Test takes ({len(tests)}): {', '.join(tests)}. Knowledge base: "

@@ -57,6 +57,27 @@ $MG evaluate --protocol bones --quiet --skip-frames 6 --kb-sources "$DAZ" \
 $MG evaluate --protocol bones --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
   --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
   --json docs/results/bones_amc31.json
+# gaps at the clip's ends (a take that starts or stops with a broken bone or a marker not yet
+# seen), where Blender and the interpolations hold the one key
+$MG evaluate --protocol bone-ends --quiet --skip-frames 6 --kb-sources "$DAZ" \
+  --methods auto interp regress match \
+  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
+         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
+         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --json docs/results/bone_ends_bvh43.json
+$MG evaluate --protocol bone-ends --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
+  --methods auto interp regress match \
+  --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
+  --json docs/results/bone_ends_amc31.json
+$MG evaluate --protocol endgaps --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
+  --methods auto knn rigid pattern local-spline spline linear \
+  --test "$D/cmu/c3d/85_02.c3d" --json docs/results/endgaps_cmu_kb.json
+$MG evaluate --protocol endgaps --quiet --skip-frames 6 --kb-sources "$DAZ" \
+  --methods auto knn rigid pattern local-spline spline linear \
+  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
+         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
+         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --json docs/results/endgaps_bvh43.json
 # the same gaps without a knowledge base (a rig no starter one fits): auto from the take alone
 $MG evaluate --protocol bones --quiet --skip-frames 6 --no-kb --methods interp auto \
   --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
