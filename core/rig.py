@@ -376,13 +376,21 @@ def hermite_rotations(turns, gaps, damping=None):
     return out
 
 
+#: at a clip end, the take's own regression of a bone stays within its channels' range over the
+#: training frames, widened by this share of it on each side (as the points' regression,
+#: :data:`~.regression.MARGIN`): a take that ends standing still is not the walk it learnt from
+ONE_SIDED_MARGIN = 0.1
+
+
 def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=False):
-    """Like :func:`interpolate_channels`, but each gap with a key on both sides takes what the
+    """Like :func:`interpolate_channels`, but each gap with a key on a side takes what the
     rest of the body says of the bone: a ridge regression of its channels on the channels of
     every bone keyed throughout the gap (at the frame and ``lags`` seconds either side, so the
     other bones' motion counts, not only their pose), fitted on the frames within ``window``
     seconds of the gap where the bone and all of those are keyed; the regression's miss at the
-    keys either side is interpolated across the gap, so the fill meets both keys. ``ridge``:
+    keys either side is interpolated across the gap, so the fill meets both keys (at a clip end
+    the miss at the one key is carried, and the prediction kept within the training frames'
+    range widened by :data:`ONE_SIDED_MARGIN` of it on each side). ``ridge``:
     the penalty per training frame on standardised channels. ``fixed`` ((bones,) bool): bones
     left as interpolated (roots). A gap with too few training frames stays linear. ``kernel``:
     a Gaussian kernel (bandwidth: the median squared distance between training frames, scaled to
@@ -395,7 +403,7 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=
     enough = max(10, int(round(0.25 * fps)))
     for b in np.flatnonzero(gaps.any(axis=0) & (True if fixed is None else ~np.asarray(fixed))):
         for a, e in _runs(gaps[:, b]):
-            if a < 1 or e > frames - 2:
+            if a < 1 and e > frames - 2:
                 continue
             others = ~gaps[max(0, a - 1):e + 2].any(axis=0)
             others[b] = False
@@ -414,9 +422,13 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=
             # ridge in its dual form: fewer training frames than features
             pred = kernel_ridge(x, train, y[train] - centre, 1.0 if kernel else 0.0,
                                 ridge) + centre
-            miss = y - pred  # known at the keys either side of the gap
+            ends = np.array([t for t in (a - 1, e + 1) if 0 <= t < frames])
+            if len(ends) == 1:  # no second key to pull it back: within what training saw
+                low, high = y[train].min(axis=0), y[train].max(axis=0)
+                pad = ONE_SIDED_MARGIN * (high - low)
+                pred = np.clip(pred, low - pad, high + pad)
+            miss = y - pred  # known at the keys beside the gap
             span = np.arange(a, e + 1)
-            ends = np.array([a - 1, e + 1])
             for k in range(width):
                 out[a:e + 1, b, k] = pred[span - lo, k] + np.interp(span, ends,
                                                                      miss[ends - lo, k])

@@ -207,6 +207,34 @@ def test_evaluate_bones_goes_on_past_a_method_that_cannot_fill(data_dir, tmp_pat
     assert len(rows["interp"]["gaps_mm"]) == len(rows["match"]["gaps_mm"]) == 4  # 129 frames
 
 
+def test_evaluate_gaps_at_the_clip_ends(data_dir, tmp_path):
+    """Protocols `endgaps` (points) and `bone-ends` (armatures): gaps that touch the take's
+    first or last frame, where Blender and the interpolations hold the one key. On the walk
+    07_05 without a knowledge base the take's own regression carries the bones on from it,
+    closer than the held key."""
+    from mocap_gapfill.core.evaluate import gappable_bones, punch_bone_gaps, punch_gaps
+    from mocap_gapfill.core.io import read_rig_take
+
+    miss = punch_gaps(100, 20, "endgaps", 12, np.random.default_rng(0))
+    starts, ends = miss[:12].all(axis=0), miss[-12:].all(axis=0)
+    assert starts.sum() == ends.sum() == 3 and not (starts & ends).any()
+    assert miss.sum() == 6 * 12
+    walk = data_dir / "cmu/bvh/daz_friendly/07/07_05.bvh.gz"
+    rig = read_rig_take(walk)[0]
+    gaps = punch_bone_gaps(rig, 500, (1, 30), ends=True)
+    assert gaps[:30].sum() == gaps[-30:].sum() == gaps.sum() // 2 == 30
+    assert set(np.flatnonzero(gaps.any(axis=0))) <= set(gappable_bones(rig))
+    out = tmp_path / "ends.json"
+    r = cli("evaluate", "--protocol", "bone-ends", "--settings", "n=1,l=120", "--methods",
+            "interp", "regress", "--test", walk, "--no-kb", "--json", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    rows = {row["method"]: row for row in json.loads(out.read_text())["results"]}
+    assert len(rows["interp"]["gaps_mm"]) == 2
+    print(f"\n07_05 bones keyless for their first or last second: held "
+          f"{rows['interp']['rmse_missing_mm']:.1f} mm, regress {rows['regress']['rmse_missing_mm']:.1f}")
+    assert rows["regress"]["rmse_missing_mm"] < 0.8 * rows["interp"]["rmse_missing_mm"]
+
+
 def test_evaluate_without_a_knowledge_base(data_dir, tmp_path):
     """`evaluate --no-kb`: what `auto` does on a rig or a marker set no knowledge base fits (the
     take alone), beside the methods that need one (scored inf, the run goes on); a knowledge
