@@ -409,10 +409,13 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
         spline = baselines.fill_spline(motion.positions)
         out = _with_spline_ends(motion, out, copies, probe, spline, weight == 0, report)
-        out, eased = _with_spline(motion, out, spline, per_sample, weight == 0,
-                                  lambda hidden: carried(motion.replace(positions=np.where(
-                                      hidden[..., None], np.nan, motion.positions)), hidden)[0],
-                                  report)
+        def rigid_of(hidden):
+            return carried(motion.replace(positions=np.where(
+                hidden[..., None], np.nan, motion.positions)), hidden)[0]
+
+        out, eased = _with_spline(motion, out, spline, per_sample, weight == 0, rigid_of, report)
+        out, at_ends = _with_pattern_ends(motion, out, per_sample, weight == 0, rigid_of, report)
+        eased.update(at_ends)
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
     if kb is not None:
@@ -660,6 +663,81 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
         report(f"auto: of {len(copies)} short gaps a spline through the take carries {eased} "
                f"more than the other estimates, a partner's pattern a quarter or more of "
                f"{patterned}")
+    return out, shares
+
+
+def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
+    """``out`` with each gap of up to :data:`AUTO_SPLINE_SECONDS` at a clip end (no observation
+    on one side: no spline across it) blended with its pattern fill from the one end
+    (:func:`~.baselines.fill_pattern`, at :data:`AUTO_PATTERN_WEIGHT`) by inverse errors per
+    sample: the pattern's on up to :data:`AUTO_SPLINE_COPIES` one-sided copies of the gap (the
+    point hidden from the copy to the same clip end, so each copy has the one end its gap has,
+    at the nearest frames where it is observed), ``out``'s on the point's copies (``e_out``) or,
+    where ``rigid_alone`` says the rigid estimate fills the point alone, that estimate's
+    (``rigid_of(hidden)``) on the same one-sided copies. Over a few frames a partner's trajectory
+    with the offset at the one end carries a marker closely; the rigid estimate from one end
+    turns with three donors' noise. Returns the blend and, per gap blended (``(point, first
+    frame)``), the spline's share (0), the pattern's and the blend's expected squared error."""
+    from .baselines import fill_pattern
+
+    missing = motion.missing
+    frames = len(missing)
+    shortest = _spline_frames(motion.fps)
+    rounds = np.zeros((AUTO_SPLINE_COPIES,) + missing.shape, bool)  # hidden, per round
+    copies, ends = [], np.zeros_like(missing)
+    for p, a, b in gap_runs(missing):
+        length = b - a + 1
+        if (a == 0) == (b == frames - 1) or length > shortest or not np.isfinite(e_out[p]):
+            continue
+        ends[a:b + 1, p] = True
+        seen, starts = ~missing[:, p], []
+        shift, reach = length + AUTO_SPLINE_MARGIN, AUTO_SPLINE_REACH * (length + AUTO_SPLINE_MARGIN)
+        while len(starts) < AUTO_SPLINE_COPIES and shift <= reach and shift + length < frames:
+            lo = shift if a == 0 else frames - shift - length
+            key = lo + length if a == 0 else lo - 1
+            k = len(starts)
+            if seen[lo:lo + length].all() and seen[key] and not rounds[k, key, p]:
+                rounds[k, :lo + length, p] |= a == 0
+                rounds[k, lo:, p] |= a > 0
+                starts.append((k, lo))
+                shift += length + AUTO_SPLINE_MARGIN
+            else:
+                shift += 1
+        if starts:
+            copies.append((p, a, b, starts))
+    if not copies:
+        return out, {}
+    donors = {}  # the pattern's donor statistics of the take, for the gaps and the copies alike
+    pattern = fill_pattern(motion.positions, only=ends, cache=donors)
+
+    def squared_error(fill):
+        return [np.sum((fill(hidden) - motion.positions) ** 2, axis=2) if hidden.any() else None
+                for hidden in rounds]
+
+    pattern_error = squared_error(lambda hidden: fill_pattern(
+        np.where(hidden[..., None], np.nan, motion.positions), only=hidden, cache=donors))
+    rigid_error = (squared_error(rigid_of) if rigid_alone[[p for p, _, _, _ in copies]].any()
+                   else None)
+    out, shares = out.copy(), {}
+    for p, a, b, starts in copies:
+        def on_copies(error):
+            return np.mean([error[k][lo:lo + b - a + 1, p].mean() for k, lo in starts])
+
+        e_here, e_pattern = e_out[p], on_copies(pattern_error)
+        if rigid_alone[p]:
+            e_rigid = on_copies(rigid_error)
+            e_here = e_rigid if np.isfinite(e_rigid) else e_here
+        if not (np.isfinite(e_pattern) and np.isfinite(pattern[a:b + 1, p]).all()):
+            continue  # no donor spans the gap or one of its copies
+        errors = np.array([e_here, e_pattern])
+        w = np.array([1.0, AUTO_PATTERN_WEIGHT]) / (errors + 1e-24)
+        w /= w.sum()
+        out[a:b + 1, p] = w[0] * out[a:b + 1, p] + w[1] * pattern[a:b + 1, p]
+        shares[p, a] = 0.0, w[1], float(np.sum(w ** 2 * errors))
+    patterned = sum(pattern_share >= 0.25 for _, pattern_share, _ in shares.values())
+    if patterned:
+        report(f"auto: of {len(shares)} short gaps at the take's ends a partner's pattern "
+               f"carries a quarter or more of {patterned}")
     return out, shares
 
 
