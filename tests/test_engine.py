@@ -607,6 +607,18 @@ def test_auto_weighs_its_methods_with_a_cheaper_fill_of_the_copies(data_dir, mon
     assert scores["scout"] < 1.05 * scores["full"]
 
 
+def _short_marker_gaps(data_dir, name, protocol):
+    """The CMU marker take ``name`` with ``protocol``'s gaps of 3, then 12 frames at 120 fps,
+    and a KB of 01_01 and 135_02 (not its subject): ``(length, take, kb, query, mask)``."""
+    c3d = data_dir / "cmu/c3d"
+    take = read_motion(c3d / f"{name}.c3d")
+    kb = build_kb([c3d / "01_01.c3d", c3d / "135_02.c3d"])
+    for length in (3, 12):
+        miss = punch_gaps(take.n_frames, take.n_points, protocol, length,
+                          np.random.default_rng(length))
+        yield length, take, kb, with_gaps(take, miss), miss
+
+
 def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir, monkeypatch):
     """85_02 (subject out of the KB) with 5 % of its samples gone in dropouts of 3 and of 12
     frames at 120 fps (the `shortgaps` protocol): over 25-100 ms a marker moves along a smooth
@@ -618,13 +630,7 @@ def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir, monkeyp
     marker's own copies instead: auto 0.74 / 7.12)."""
     from mocap_gapfill.core import fill as fill_module
 
-    c3d = data_dir / "cmu/c3d"
-    take = read_motion(c3d / "85_02.c3d")
-    kb = build_kb([c3d / "01_01.c3d", c3d / "135_02.c3d"])
-    for length in (3, 12):
-        miss = punch_gaps(take.n_frames, take.n_points, "shortgaps", length,
-                          np.random.default_rng(length))
-        query = with_gaps(take, miss)
+    for length, take, kb, query, miss in _short_marker_gaps(data_dir, "85_02", "shortgaps"):
         scores = {m: rmse_mm(fill(query, m, kb=kb), take, miss)
                   for m in ("auto", "spline", "rigid", "pattern")}
         with monkeypatch.context() as patch:
@@ -644,13 +650,7 @@ def test_auto_lets_a_partners_pattern_carry_short_gaps_at_the_takes_ends(data_di
     1.61 / 4.59, without the pattern 2.32 / 4.86, rigid 2.13 / 4.78, pattern 6.80 / 32.5."""
     from mocap_gapfill.core import fill as fill_module
 
-    c3d = data_dir / "cmu/c3d"
-    take = read_motion(c3d / "06_01.c3d")
-    kb = build_kb([c3d / "01_01.c3d", c3d / "135_02.c3d"])
-    for length in (3, 12):
-        miss = punch_gaps(take.n_frames, take.n_points, "endgaps", length,
-                          np.random.default_rng(length))
-        query = with_gaps(take, miss)
+    for length, take, kb, query, miss in _short_marker_gaps(data_dir, "06_01", "endgaps"):
         filled, accounts = fill(query, "auto", kb=kb, return_account=True)
         scores = {m: rmse_mm(fill(query, m, kb=kb), take, miss) for m in ("rigid", "pattern")}
         scores["auto"] = rmse_mm(filled, take, miss)

@@ -8,14 +8,20 @@ MG=".venv/bin/mocap-gapfill"
 mkdir -p docs/results
 export OMP_NUM_THREADS=2
 DAZ="$D/cmu/bvh/daz_friendly"
+# the Daz-friendly BVH test takes: eight takes of eight subjects
+BVH43=("$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz
+       "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz
+       "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz)
 $MG evaluate --protocol joints --quiet --skip-frames 6 --kb-sources "$DAZ" \
-  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
-         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
-         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --test "${BVH43[@]}" \
   --json docs/results/joints_bvh43.json
 AMC="$D/cmu/asfamc"
+AMC31=("$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc)
+# three subjects of another lab (HDM05), each against a KB of the other two
+HDM05=("$D"/hdm05/c3d/HDM_bd_05-01_01_120.c3d "$D"/hdm05/c3d/HDM_dg_06-03_03_120.c3d
+       "$D"/hdm05/c3d/HDM_mm_01-02_03_120.c3d)
 $MG evaluate --protocol joints --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
-  --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
+  --test "${AMC31[@]}" \
   --json docs/results/joints_amc31.json
 $MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
   --test "$D/cmu/c3d/85_02.c3d" --json docs/results/markers_cmu_kb.json
@@ -29,9 +35,7 @@ $MG evaluate --protocol shortgaps --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
   --test "$D/cmu/c3d/85_02.c3d" --json docs/results/shortgaps_cmu_kb.json
 $MG evaluate --protocol shortgaps --quiet --skip-frames 6 --kb-sources "$DAZ" \
   --methods auto knn rigid pattern local-spline spline linear \
-  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
-         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
-         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --test "${BVH43[@]}" \
   --json docs/results/shortgaps_bvh43.json
 # HDM05-derived numbers (CC BY-SA 3.0 data in the knowledge base)
 $MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
@@ -39,56 +43,45 @@ $MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
 # other subjects of another lab: each HDM05 take against a KB of the other two (markers)
 $MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
   --methods auto rigid pattern local-spline spline linear \
-  --test "$D"/hdm05/c3d/HDM_bd_05-01_01_120.c3d "$D"/hdm05/c3d/HDM_dg_06-03_03_120.c3d \
-         "$D"/hdm05/c3d/HDM_mm_01-02_03_120.c3d --json docs/results/markers_hdm05_subjects.json
+  --test "${HDM05[@]}" --json docs/results/markers_hdm05_subjects.json
 $MG evaluate --protocol shortgaps --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
   --methods auto rigid pattern local-spline spline linear \
-  --test "$D"/hdm05/c3d/HDM_bd_05-01_01_120.c3d "$D"/hdm05/c3d/HDM_dg_06-03_03_120.c3d \
-         "$D"/hdm05/c3d/HDM_mm_01-02_03_120.c3d --json docs/results/shortgaps_hdm05_subjects.json
+  --test "${HDM05[@]}" --json docs/results/shortgaps_hdm05_subjects.json
 $MG evaluate --protocol bodyparts --quiet --skip-frames 6 --kb-sources "$DAZ" \
   --test "$DAZ"/05/05_02.bvh.gz "$DAZ"/13/13_30.bvh.gz "$DAZ"/09/09_12.bvh.gz \
   --json docs/results/bodyparts_bvh43.json
 # armature rotation gaps at the takes' own rate (120 fps), KB at 60 fps
 $MG evaluate --protocol bones --quiet --skip-frames 6 --kb-sources "$DAZ" \
-  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
-         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
-         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --test "${BVH43[@]}" \
   --json docs/results/bones_bvh43.json
 $MG evaluate --protocol bones --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
-  --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
+  --test "${AMC31[@]}" \
   --json docs/results/bones_amc31.json
 # gaps at the clip's ends (a take that starts or stops with a broken bone or a marker not yet
 # seen), where Blender and the interpolations hold the one key
 $MG evaluate --protocol bone-ends --quiet --skip-frames 6 --kb-sources "$DAZ" \
   --methods auto interp regress match \
-  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
-         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
-         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --test "${BVH43[@]}" \
   --json docs/results/bone_ends_bvh43.json
 $MG evaluate --protocol bone-ends --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
   --methods auto interp regress match \
-  --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
+  --test "${AMC31[@]}" \
   --json docs/results/bone_ends_amc31.json
 $MG evaluate --protocol endgaps --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
   --methods auto knn rigid pattern local-spline spline linear \
   --test "$D/cmu/c3d/85_02.c3d" --json docs/results/endgaps_cmu_kb.json
 $MG evaluate --protocol endgaps --quiet --skip-frames 6 --kb-sources "$DAZ" \
   --methods auto knn rigid pattern local-spline spline linear \
-  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
-         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
-         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --test "${BVH43[@]}" \
   --json docs/results/endgaps_bvh43.json
 # the same gaps without a knowledge base (a rig no starter one fits): auto from the take alone
 $MG evaluate --protocol bones --quiet --skip-frames 6 --no-kb --methods interp auto \
-  --test "$DAZ"/01/01_01.bvh.gz "$DAZ"/05/05_02.bvh.gz "$DAZ"/06/06_10.bvh.gz \
-         "$DAZ"/09/09_12.bvh.gz "$DAZ"/10/10_01.bvh.gz "$DAZ"/12/12_02.bvh.gz \
-         "$DAZ"/13/13_30.bvh.gz "$DAZ"/02/02_02.bvh.gz \
+  --test "${BVH43[@]}" \
   --json docs/results/bones_bvh43_no_kb.json
 $MG evaluate --protocol bones --quiet --no-kb --methods interp auto \
-  --test "$AMC"/01/01_01.amc "$AMC"/131/131_04.amc "$AMC"/135/135_06.amc "$AMC"/11/11_01.amc \
+  --test "${AMC31[@]}" \
   --json docs/results/bones_amc31_no_kb.json
 $MG evaluate --protocol markers --quiet --fps 120 --no-kb --methods auto rigid pattern \
   --test "$D"/cmu/c3d/85_02.c3d --json docs/results/markers_cmu_no_kb.json
 $MG evaluate --protocol markers --quiet --fps 120 --no-kb --methods auto rigid pattern \
-  --test "$D"/hdm05/c3d/HDM_bd_05-01_01_120.c3d "$D"/hdm05/c3d/HDM_dg_06-03_03_120.c3d \
-         "$D"/hdm05/c3d/HDM_mm_01-02_03_120.c3d --json docs/results/markers_hdm05_no_kb.json
+  --test "${HDM05[@]}" --json docs/results/markers_hdm05_no_kb.json
