@@ -271,7 +271,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     copies. Longer gaps lean towards a spline through the take next to their ends
     (:func:`_with_spline_ends`); short gaps (:data:`AUTO_SPLINE_SECONDS`) are last blended with
     that spline and a partner's pattern by their errors on copies of each gap
-    (:func:`_with_spline`).
+    (:func:`_with_spline`), those at a clip end with the pattern from the one end alone, by
+    errors on one-sided copies (:func:`_with_pattern_ends`).
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
@@ -409,6 +410,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
         spline = baselines.fill_spline(motion.positions)
         out = _with_spline_ends(motion, out, copies, probe, spline, weight == 0, report)
+
         def rigid_of(hidden):
             return carried(motion.replace(positions=np.where(
                 hidden[..., None], np.nan, motion.positions)), hidden)[0]
@@ -595,10 +597,10 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     smooth curve that the spline follows within a millimetre, closer than any estimate carried from
     other points; over longer gaps its error grows fast, with a tail its copies do not foresee, so
     only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline
-    across them) and points without a finite ``e_out`` keep ``out``; the pattern joins only where a
-    partner spans the gap and each of its copies. Returns the blend and, per gap blended (``(point,
-    first frame)``), the spline's and the pattern's shares and the blend's expected squared error
-    (the errors as if independent)."""
+    across them: :func:`_with_pattern_ends`) and points without a finite ``e_out`` keep ``out``;
+    the pattern joins only where a partner spans the gap and each of its copies. Returns the
+    blend and, per gap blended (``(point, first frame)``), the spline's and the pattern's shares
+    and the blend's expected squared error (the errors as if independent)."""
     from .baselines import fill_pattern, fill_spline
 
     missing = motion.missing
@@ -691,7 +693,8 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
             continue
         ends[a:b + 1, p] = True
         seen, starts = ~missing[:, p], []
-        shift, reach = length + AUTO_SPLINE_MARGIN, AUTO_SPLINE_REACH * (length + AUTO_SPLINE_MARGIN)
+        shift = length + AUTO_SPLINE_MARGIN
+        reach = AUTO_SPLINE_REACH * shift
         while len(starts) < AUTO_SPLINE_COPIES and shift <= reach and shift + length < frames:
             lo = shift if a == 0 else frames - shift - length
             key = lo + length if a == 0 else lo - 1
