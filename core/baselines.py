@@ -216,7 +216,6 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     spreads = np.full(seen.shape, np.nan)
     stats = {} if cache is None else cache
     partners = pos if partners is None else np.asarray(partners, dtype=np.float64)
-    same = same_points(partners)
     runs = {}
     for p, a, b in gap_runs(~seen):
         if only is None or only[a, p]:
@@ -236,7 +235,9 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
             order = np.flatnonzero(np.isfinite(spread))
             order = order[np.argsort(spread[order], kind="stable")]
             # a second copy of a donor adds nothing to its fit but a turn about the others
-            kept = [j for i, j in enumerate(order) if not same[j, order[:i]].any()]
+            if "same" not in stats:
+                stats["same"] = same_points(partners)
+            kept = [j for i, j in enumerate(order) if not stats["same"][j, order[:i]].any()]
             stats[p] = spread, np.array(kept, dtype=int), _mutual(spread, kept, spread_of)
         estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
         if reach:
