@@ -628,20 +628,15 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     donors = {}  # the pattern's donor statistics of the take, for the gaps and the copies alike
     pattern = fill_pattern(motion.positions, only=short, cache=donors)
 
-    def squared_error(fill):
-        """Per round of copies, ``fill``'s squared error with the round's samples hidden."""
-        return [np.sum((fill(np.where(hidden[..., None], np.nan, motion.positions), hidden)
-                        - motion.positions) ** 2, axis=2) if hidden.any() else None
-                for hidden in rounds]
+    def hide(hidden):
+        return np.where(hidden[..., None], np.nan, motion.positions)
 
-    error = squared_error(lambda pos, hidden: fill_spline(pos))
-    pattern_error = squared_error(lambda pos, hidden: fill_pattern(pos, only=hidden,
-                                                                   cache=donors))
+    error = _round_errors(rounds, motion.positions, lambda hidden: fill_spline(hide(hidden)))
+    pattern_error = _round_errors(rounds, motion.positions, lambda hidden: fill_pattern(
+        hide(hidden), only=hidden, cache=donors))
     # where the rigid estimate alone fills a point, it is scored on the spline's own copies
     if rigid_alone[[p for p, _, _, _ in copies]].any():
-        rigid_error = [np.sum((rigid_of(hidden) - motion.positions) ** 2, axis=2)
-                       if hidden.any() else None
-                       for hidden in rounds]
+        rigid_error = _round_errors(rounds, motion.positions, rigid_of)
     out, shares = out.copy(), {}
     for p, a, b, starts in copies:
         def on_copies(error):
@@ -653,12 +648,9 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
             e_here = e_rigid if np.isfinite(e_rigid) else e_here
         if not (np.isfinite(e_pattern) and np.isfinite(pattern[a:b + 1, p]).all()):
             e_pattern = np.inf  # no donor spans the gap or one of its copies
-        errors = np.array([e_here, e_spline, e_pattern])
-        w = np.array([1.0, 1.0, AUTO_PATTERN_WEIGHT]) / (errors + 1e-24)
-        w /= w.sum()
-        out[a:b + 1, p] = w[0] * out[a:b + 1, p] + w[1] * spline[a:b + 1, p] + \
-            (w[2] * pattern[a:b + 1, p] if w[2] else 0.0)
-        shares[p, a] = w[1], w[2], float(np.sum(w[w > 0] ** 2 * errors[w > 0]))
+        w, squared = _weigh_in(out, p, a, b, (spline, pattern), (e_here, e_spline, e_pattern),
+                               (1.0, 1.0, AUTO_PATTERN_WEIGHT))
+        shares[p, a] = w[1], w[2], squared
     eased = sum(spline_share >= 0.5 for spline_share, _, _ in shares.values())
     patterned = sum(pattern_share >= 0.25 for _, pattern_share, _ in shares.values())
     if eased or patterned:
@@ -713,14 +705,10 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
     donors = {}  # the pattern's donor statistics of the take, for the gaps and the copies alike
     pattern = fill_pattern(motion.positions, only=ends, cache=donors)
 
-    def squared_error(fill):
-        return [np.sum((fill(hidden) - motion.positions) ** 2, axis=2) if hidden.any() else None
-                for hidden in rounds]
-
-    pattern_error = squared_error(lambda hidden: fill_pattern(
+    pattern_error = _round_errors(rounds, motion.positions, lambda hidden: fill_pattern(
         np.where(hidden[..., None], np.nan, motion.positions), only=hidden, cache=donors))
-    rigid_error = (squared_error(rigid_of) if rigid_alone[[p for p, _, _, _ in copies]].any()
-                   else None)
+    rigid_error = (_round_errors(rounds, motion.positions, rigid_of)
+                   if rigid_alone[[p for p, _, _, _ in copies]].any() else None)
     out, shares = out.copy(), {}
     for p, a, b, starts in copies:
         def on_copies(error):
@@ -732,16 +720,38 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
             e_here = e_rigid if np.isfinite(e_rigid) else e_here
         if not (np.isfinite(e_pattern) and np.isfinite(pattern[a:b + 1, p]).all()):
             continue  # no donor spans the gap or one of its copies
-        errors = np.array([e_here, e_pattern])
-        w = np.array([1.0, AUTO_PATTERN_WEIGHT]) / (errors + 1e-24)
-        w /= w.sum()
-        out[a:b + 1, p] = w[0] * out[a:b + 1, p] + w[1] * pattern[a:b + 1, p]
-        shares[p, a] = 0.0, w[1], float(np.sum(w ** 2 * errors))
+        w, squared = _weigh_in(out, p, a, b, (pattern,), (e_here, e_pattern),
+                               (1.0, AUTO_PATTERN_WEIGHT))
+        shares[p, a] = 0.0, w[1], squared
     patterned = sum(pattern_share >= 0.25 for _, pattern_share, _ in shares.values())
     if patterned:
         report(f"auto: of {len(shares)} short gaps at the take's ends a partner's pattern "
                f"carries a quarter or more of {patterned}")
     return out, shares
+
+
+def _round_errors(rounds, truth, fill):
+    """Per round of copies (``rounds``: (round, frames, points) bool, the samples hidden),
+    ``fill(hidden)``'s squared error against ``truth`` (frames, points); None for a round that
+    hides nothing."""
+    return [np.sum((fill(hidden) - truth) ** 2, axis=2) if hidden.any() else None
+            for hidden in rounds]
+
+
+def _weigh_in(out, p, a, b, others, errors, weights):
+    """``out``'s gap ``a..b`` of point ``p`` blended in place with the ``others`` (whole
+    estimates of the take) by ``weights`` over ``errors`` (``out``'s first: inverse-error
+    weights); returns the shares and the blend's expected squared error (the errors as if
+    independent). An estimate of no share is left out (it may have no value there)."""
+    errors = np.asarray(errors)
+    w = np.asarray(weights) / (errors + 1e-24)
+    w /= w.sum()
+    blend = w[0] * out[a:b + 1, p]
+    for share, other in zip(w[1:], others):
+        if share:
+            blend = blend + share * other[a:b + 1, p]
+    out[a:b + 1, p] = blend
+    return w, float(np.sum(w[w > 0] ** 2 * errors[w > 0]))
 
 
 def _spline_frames(fps):
