@@ -14,7 +14,7 @@ smooth because each window is real motion. The armature fill matches bone rotati
 import numpy as np
 
 from .kb import match_names
-from .motion import blend_into_gaps, gap_runs, widened
+from .motion import blend_into_gaps, gap_runs, interpolate_rows, widened
 from .normalize import denormalize, frames_of, normalize, reference_template
 
 #: playback speeds of the knowledge base tried against the take
@@ -177,6 +177,9 @@ POSE_CHUNK = 4.0
 #: the knowledge base's poses are matched at most this many a second (a second of motion is
 #: seen well at 30 poses; the cost grows with the square of the rate)
 POSE_FPS = 30.0
+#: the take itself is searched beside the knowledge base wherever it shows the points a
+#: stretch lacks (the same subject and style; the armatures' ``bonefill.MATCH_OWN``)
+POSE_OWN = True
 
 
 def fill_match(motion, kb, points=None, should_cancel=None):
@@ -201,20 +204,34 @@ def fill_match(motion, kb, points=None, should_cancel=None):
     features = np.nan_to_num(normalize(pos, root, angle))
     fps, frames = motion.fps, len(pos)
     margin, chunk, over = (int(round(s * fps)) for s in (POSE_CONTEXT, POSE_CHUNK, POSE_PIECE))
-    stretches, joins = [], []
+    stretches, joins, needs = [], [], []
     for _, a, e in gap_runs(wanted.any(axis=1)[:, None]):
         lo, hi = max(0, a - margin), min(frames - 1, e + margin)
         while True:
             last = min(hi, lo + chunk - 1)
             stretches.append((lo, last))
             joins.append((lo > max(0, a - margin), last < hi))
+            # the points gapped in the stretch's own gap frames (not its context)
+            needs.append(wanted[max(lo, a):min(last, e) + 1].any(axis=0))
             if last >= hi:
                 break
             lo = last - over + 1
-    found = match_windows(features, (~missing).astype(float), kb_poses,
-                          kb.source_index[::stride], fps, kb.fps / stride, stretches,
-                          width=POSE_PIECE,
-                          on_stretch=_cancel_check(should_cancel))
+    source, hidden = kb.source_index[::stride], None
+    if POSE_OWN:
+        # the take at the knowledge base's pose rate, its other gaps interpolated; a window
+        # of it counts only where it shows every point the stretch lacks
+        times = np.arange(0, frames - 1 + 1e-9, fps * stride / kb.fps)
+        seen = np.stack([interpolate_rows(features[:, i], ~missing[:, i])
+                         for i in range(len(q))], axis=1)
+        own = at_times(seen, times, frames - 1).astype(np.float32)
+        kb_poses = np.concatenate([kb_poses, own])
+        source = np.concatenate([source, np.full(len(times), kb.source_index.max() + 1)])
+        hidden = np.concatenate([np.zeros((len(kb_poses) - len(own), len(q)), bool),
+                                 at_times(missing.astype(float), times, frames - 1) > 0])
+    found = match_windows(features, (~missing).astype(float), kb_poses, source, fps,
+                          kb.fps / stride, stretches, width=POSE_PIECE,
+                          on_stretch=_cancel_check(should_cancel), kb_hidden=hidden,
+                          needs=needs)
     total, share = np.zeros(pos.shape), np.zeros(frames)
     for (lo, hi), (after, before), mean in zip(stretches, joins, found):
         if mean is None:
