@@ -187,7 +187,8 @@ def fill_match(motion, kb, points=None, should_cancel=None):
     ((points,) bool, default all; the other gaps stay as they are) and
     :data:`POSE_CONTEXT` either side) takes the mean of the knowledge-base windows whose poses,
     normalised as the knowledge base's are, move most like the take's present points
-    (:func:`match_windows`, pieces of :data:`POSE_PIECE`), each gap offset to meet the
+    (:func:`match_windows`, pieces of :data:`POSE_PIECE`; the take's own windows too wherever
+    they show the points the stretch lacks: :data:`POSE_OWN`), each gap offset to meet the
     observations at its ends. A whole limb gone for seconds takes real motion of a body that
     moved like this one; where few points are missing the per-frame models of ``knn`` fit the
     pose better. The motion with those gaps filled (NaN where no window matched).
