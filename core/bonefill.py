@@ -409,7 +409,7 @@ class _Job:
         rotation of each gapped bone, times an offset slerped across the gap from what it takes
         to meet the keys at either end. Needs a knowledge base with bone rotations; bones it
         lacks keep ``basis``."""
-        from .matching import at_times, match_windows, pose_table
+        from .matching import match_windows, pose_table, take_as_source
 
         kb, rig = self.kb, self.rig
         bones = [b for b, name in enumerate(rig.names) if name in kb.bones and not rig.roots[b]]
@@ -441,14 +441,10 @@ class _Job:
         # the take itself wherever it keys the bones gapped in a stretch (not counting its
         # context; other gapped bones as Blender interpolates them): the same subject and style
         if MATCH_OWN:
-            times = np.arange(0, frames - 1 + 1e-9, self.fps / kb.fps)  # at the KB's rate
-            own = at_times(features, times, frames - 1).astype(np.float32)
+            own, source, hidden = take_as_source(features, gap, self.fps, kb.fps,
+                                                 kb.source_index)
             kb_features = np.concatenate([kb_features, own])
             table = np.concatenate([table, pose_table(own)])
-            source = np.concatenate([kb.source_index,
-                                     np.full(len(times), kb.source_index.max() + 1)])
-            hidden = np.concatenate([np.zeros((len(kb.turns), len(bones)), bool),
-                                     at_times(gap.astype(float), times, frames - 1) > 0])
         else:
             source, hidden = kb.source_index, None
         # matched in pieces: short ones where one bone is gapped (the rest of the body says

@@ -131,6 +131,21 @@ def at_times(values, times, last):
     return values[i0] * (1 - part) + values[i1] * part
 
 
+def take_as_source(features, gaps, fps, kb_fps, kb_source):
+    """The take's ``features`` (frames, items, d; no NaN) at the knowledge base's pose rate, as
+    one more source after the knowledge base's (``kb_source``, per pose): its poses (float32),
+    the source index of every pose and, per pose, the items ``gaps`` (frames, items) says are
+    gapped there (:func:`match_windows`' ``kb_hidden``: a window of the take counts only where
+    it shows what the stretch lacks)."""
+    frames = len(features)
+    times = np.arange(0, frames - 1 + 1e-9, fps / kb_fps)
+    own = at_times(features, times, frames - 1).astype(np.float32)
+    source = np.concatenate([kb_source, np.full(len(times), kb_source.max() + 1)])
+    hidden = np.concatenate([np.zeros((len(kb_source), gaps.shape[1]), bool),
+                             at_times(gaps.astype(float), times, frames - 1) > 0])
+    return own, source, hidden
+
+
 def pose_table(kb_features):
     """Each pose's features and their squares per item, float32 like the poses: one product per
     stretch and speed with it gives every term of the distances that involves the poses. Row by
@@ -221,14 +236,10 @@ def fill_match(motion, kb, points=None, should_cancel=None):
     if POSE_OWN:
         # the take at the knowledge base's pose rate, its other gaps interpolated; a window
         # of it counts only where it shows every point the stretch lacks
-        times = np.arange(0, frames - 1 + 1e-9, fps * stride / kb.fps)
         seen = np.stack([interpolate_rows(features[:, i], ~missing[:, i])
                          for i in range(len(q))], axis=1)
-        own = at_times(seen, times, frames - 1).astype(np.float32)
+        own, source, hidden = take_as_source(seen, missing, fps, kb.fps / stride, source)
         kb_poses = np.concatenate([kb_poses, own])
-        source = np.concatenate([source, np.full(len(times), kb.source_index.max() + 1)])
-        hidden = np.concatenate([np.zeros((len(kb_poses) - len(own), len(q)), bool),
-                                 at_times(missing.astype(float), times, frames - 1) > 0])
     found = match_windows(features, (~missing).astype(float), kb_poses, source, fps,
                           kb.fps / stride, stretches, width=POSE_PIECE,
                           on_stretch=_cancel_check(should_cancel), kb_hidden=hidden,
