@@ -5,7 +5,8 @@ out of a knowledge base that holds no test take), filled by ``auto``; per gap ho
 interpolation, the interpolation's error on the gap's copies (the copies ``auto`` judges by), the
 joint speed at the gap's keys, and the error of the fill moved ``t`` = 0, 0.05, ..., 1 of the way
 from the interpolation's joints to its own (t = 1: the fill; linear in the joints), so that a
-veto or cap can be scored without filling again.
+veto or cap can be scored without filling again; and (session 41) how much calmer the bones
+about the gapped one move over the gap than over its copies.
 
     python tools/lost_gaps.py OUT.jsonl            # run (the Daz tuning takes; AMC=1: ASF/AMC;
                                                    # TAKES=01_08,02_05: only those)
@@ -85,8 +86,48 @@ def run(out):
                         "copies_interp_mm": float(np.mean(copy_mm)) if copy_mm else None,
                         "key_speed_mm": float(np.mean(speed)) if speed else None,
                         "curve_mm": [1000 * _rms(s + step * (f - s) - t) for step in STEPS],
+                        # how much calmer the bones about the gapped one are over the gap
+                        # than over its copies (log ratio of their departure from a line)
+                        "calm_log": _calm(rig, seen, gaps, b, a, e - a + 1, own),
                     }) + "\n")
                 print(path.name, label, flush=True)
+
+
+def _calm(rig, channels, gaps, bone, start, length, copies, hops=2, floor=0.05):
+    """log((D_gap + floor) / (mean D_copy + floor)): D the RMS over the bones within ``hops``
+    joints of ``bone`` (those keyed through the gap and every copy) of their angle (degrees) off
+    the straight line between their keys either side of the window; None without copies."""
+    near = {bone}
+    for _ in range(hops):
+        near |= {b for b, p in enumerate(rig.parents) if p in near}
+        near |= {rig.parents[b] for b in near if rig.parents[b] >= 0}
+    windows = [(start, length)] + [(c[2], c[3]) for c in copies]
+    off = np.array([_off_line(rig, channels, gaps, s, n) for s, n in windows])
+    use = np.zeros(off.shape[1], bool)
+    use[sorted(near - {bone})] = True
+    use &= ~np.isnan(off).any(axis=0)
+    if len(windows) < 2 or not use.any():
+        return None
+    rms = np.sqrt(np.mean(off[:, use] ** 2, axis=1))
+    return float(np.log((rms[0] + floor) / (rms[1:].mean() + floor)))
+
+
+def _off_line(rig, channels, gaps, start, length):
+    """Per bone, the RMS angle (degrees) between its rotation over frames ``start`` ...
+    ``start + length - 1`` and the straight line between its keys either side (NaN for roots and
+    bones gapped there)."""
+    lo, hi = max(start - 1, 0), min(start + length + 1, len(channels))
+    part = channels[lo:hi]
+    hide = np.zeros(part.shape[:2], bool)
+    hide[start - lo:start - lo + length] = True
+    zero = np.zeros(part.shape[:2] + (3,))
+    true = basis_matrices(rig, part, zero)[..., :3, :3]
+    line = basis_matrices(rig, interpolate_channels(part, hide), zero)[..., :3, :3]
+    cos = (np.einsum("fbij,fbij->fb", true, line) - 1) / 2
+    angle = np.degrees(np.arccos(np.clip(cos, -1, 1)))[start - lo:start - lo + length]
+    out = np.sqrt(np.mean(angle ** 2, axis=0))
+    out[rig.roots | gaps[start:start + length].any(axis=0)] = np.nan
+    return out
 
 
 def _rms(x):
@@ -119,7 +160,10 @@ def score(path):
              "departure <= copies' interp error": lambda r: 1.0 if not r["copies_interp_mm"]
              else min(1.0, r["copies_interp_mm"] / max(r["departure_mm"], 1e-9)),
              **{f"calm gap, c = {c}": calm(c) for c in (0.5, 1, 2)},
-             "calm gap, c = 2, estimate > 0.7": calm(2, narrow=True)}
+             "calm gap, c = 2, estimate > 0.7": calm(2, narrow=True),
+             # session 41: the bones about the gap calmer than about its copies
+             "neighbours calmer, t = e^(calm + 0.5)": lambda r: 1.0 if r.get("calm_log") is None
+             else min(1.0, np.exp(r["calm_log"] + 0.5))}
     for name, rule in rules.items():
         ratios, lost = defaultdict(list), 0
         for gaps in by_setting.values():
@@ -133,6 +177,20 @@ def score(path):
         every = [v for values in ratios.values() for v in values]
         print(f"{name:34s}", " / ".join(f"{np.exp(np.mean(ratios[l])):.3f}" for l in sorted(ratios)),
               f"all {np.exp(np.mean(every)):.3f}, lost {lost} of {len(rows)}")
+    # does the calm of the bones about a gap foretell its interpolation error, or the fill's
+    # error against what its copies expected?
+    known = [r for r in rows if r.get("calm_log") is not None and r["copies_interp_mm"]
+             and r["curve_mm"][0] > 0.5 and r["copies_interp_mm"] > 0.5]
+    calm = np.array([r["calm_log"] for r in known])
+    interp = np.log([r["curve_mm"][0] / r["copies_interp_mm"] for r in known])
+    print(f"calm vs log(gap's / copies' interpolation error): r = "
+          f"{np.corrcoef(calm, interp)[0, 1]:.2f} over {len(known)} gaps")
+    judged = [i for i, r in enumerate(known) if r["method"] != "interp" and r["estimate"] > 0]
+    if judged:
+        miss = np.log([max(known[i]["curve_mm"][-1], 1e-3) / known[i]["curve_mm"][0]
+                       / known[i]["estimate"] for i in judged])
+        print(f"calm vs log(fill's ratio to interpolation / the copies' estimate): r = "
+              f"{np.corrcoef(calm[judged], miss)[0, 1]:.2f} over {len(judged)} gaps")
     lost = [r for r in rows if r["curve_mm"][-1] > 1.1 * r["curve_mm"][0] + 2]
     print("lost by fill:", dict(Counter(r["method"] for r in lost)))
     print("lost by take:", dict(Counter(r["take"] for r in lost)))
