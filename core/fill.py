@@ -57,6 +57,12 @@ AUTO_SPREAD_CAP = 2.0
 #: (:func:`~.regression.regress_points`), weighted by its errors on the copies (on shorter gaps
 #: and on marker sets it misled the copies: docs/METHOD_NOTES.md, "Session 22")
 AUTO_MATCH_SECONDS = 1.0
+#: and there a partner's pattern (:func:`~.baselines.fill_pattern`) joins the knowledge base's
+#: estimate too where it refills the copies better still, its error on them raised to at least
+#: this many times the variance of its offset to its steadiest partner seen through the gaps:
+#: short copies of a limb gone for seconds flatter a partner whose offset wanders (a leg follows
+#: the other through jumps and squats, not through a walk; docs/METHOD_NOTES.md, "Session 41")
+AUTO_PATTERN_FLOOR = 0.5
 #: gaps of at most this many seconds are also blended with a spline through the take
 #: (:func:`_with_spline`), by its error on up to ``AUTO_SPLINE_COPIES`` copies of each gap, kept
 #: ``AUTO_SPLINE_MARGIN`` frames from any gap and within ``AUTO_SPLINE_REACH`` gap lengths of
@@ -95,12 +101,13 @@ class GapAccount:
     estimates in its fill, as ``auto`` weighed them on the point's copies (they sum to 1):
     ``rigid`` (the rigid partners), ``models`` (the knowledge base's local models), ``windows``
     (the knowledge base's windows of motion), ``own`` (the take's own regression on the rest of
-    the body), ``spline`` (a spline through the take, short gaps). Where an estimate has no value
-    at some frame (no rigid donors there) the others fill it alone. ``estimate``: the fill's RMS
-    error in metres on copies of the point's gaps (the point hidden where it is observed,
-    refilled as the gaps were), its rigid part scaled to how far the rigid donors spread over
-    this gap (:func:`_harder_for_partners`): what ``auto`` expects here, not a measurement of
-    the gap; NaN where the point had no copies."""
+    the body), ``spline`` (a spline through the take, short gaps), ``pattern`` (a partner's
+    pattern: short gaps, and a point's long gaps within the knowledge base's side). Where an
+    estimate has no value at some frame (no rigid donors there) the others fill it alone.
+    ``estimate``: the fill's RMS error in metres on copies of the point's gaps (the point hidden
+    where it is observed, refilled as the gaps were), its rigid part scaled to how far the rigid
+    donors spread over this gap (:func:`_harder_for_partners`): what ``auto`` expects here, not
+    a measurement of the gap; NaN where the point had no copies."""
 
     point: str
     first: int
@@ -268,9 +275,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     windows of motion (:func:`~.matching.fill_match`) weighted by their errors on the copies,
     the windows only where they refill them better, and then the take's own regression of the
     point on the rest of the body (:func:`~.regression.regress_points`), by its error on the
-    copies. Longer gaps lean towards a spline through the take next to their ends
-    (:func:`_with_spline_ends`); short gaps (:data:`AUTO_SPLINE_SECONDS`) are last blended with
-    that spline and a partner's pattern by their errors on copies of each gap
+    copies, and a partner's pattern where it refills them better still
+    (:data:`AUTO_PATTERN_FLOOR`). Longer gaps lean towards a spline through the take next to
+    their ends (:func:`_with_spline_ends`); short gaps (:data:`AUTO_SPLINE_SECONDS`) are last
+    blended with that spline and a partner's pattern by their errors on copies of each gap
     (:func:`_with_spline`), those at a clip end with the pattern from the one end alone, by
     errors on one-sided copies (:func:`_with_pattern_ends`).
     """
@@ -296,6 +304,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                 & (motion.parents is not None) & (kb is not None))
 
     partners = {}  # the donors' statistics on this take, computed once
+    donors = {}  # the pattern's, on the take with its copies hidden
     # marker sets reach past the gap ends and let partners carry a marker alone within more
     reach, alone = ((AUTO_REACH, AUTO_RIGID_FIRST_MARKERS) if motion.parents is None
                     else (None, AUTO_RIGID_FIRST))
@@ -329,6 +338,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                          if long.any() else None,
                                          regress_points(hidden.positions, motion.names,
                                                         probe & long[None])
+                                         if long.any() else None,
+                                         baselines.fill_pattern(hidden.positions,
+                                                                only=probe & long[None],
+                                                                cache=donors)
                                          if long.any() else None))
         try:
             # one pass: its only use is to weigh the methods
@@ -343,10 +356,11 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
-        (on_copies, copies_spread), matched, regressed = estimates.result()
+        (on_copies, copies_spread), matched, regressed, patterned = estimates.result()
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point
-    # within the knowledge base's estimate, the windows' share and the take's regression's
-    windows, own = np.zeros(motion.n_points), np.zeros(motion.n_points)
+    # within the knowledge base's estimate, the windows' share, the take's regression's and the
+    # partner's pattern's
+    windows, own, by_partner = (np.zeros(motion.n_points) for _ in range(3))
     per_sample = np.full(motion.n_points, np.nan)  # the fill's squared error on its copies
     eased = {}  # short gaps blended with a spline: the spline's share and the error expected
     if probe.any():
@@ -373,6 +387,14 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                 own = (1.0 / e_own) / (1.0 / e_kb + 1.0 / e_own)  # its share
                 e_kb = 1.0 / (1.0 / e_kb + 1.0 / e_own)
             own = np.nan_to_num(own)
+            # the partner's pattern where it refilled them better still, trusted no closer than
+            # its offset wanders over the take
+            e_pattern = np.maximum(on_copies_of(patterned), AUTO_PATTERN_FLOOR * probe.sum(
+                axis=0) * _offset_variance(missing, donors))
+            e_pattern = np.where(long & (e_pattern < e_kb), e_pattern, np.inf)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                by_partner = np.nan_to_num((1.0 / e_pattern) / (1.0 / e_kb + 1.0 / e_pattern))
+                e_kb = 1.0 / (1.0 / e_kb + 1.0 / e_pattern)
         with np.errstate(invalid="ignore"):
             share = e_rigid / (e_kb + e_rigid)
         weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
@@ -401,10 +423,17 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                           missing & (own > 0)[None]), own)
         report(f"auto: the take's own regression on the rest of the body joins on "
                f"{int((own > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
+    if long.any() and (by_partner > 0).any():
+        knn = _mix_in(knn, baselines.fill_pattern(
+            given.positions, only=missing & (by_partner > 0)[None]), by_partner)
+        report(f"auto: a partner's pattern joins the knowledge base's estimate on "
+               f"{int((by_partner > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or "
+               f"more")
     out = _blend(knn, rigid, weight)
     if probe.any():
         if long.any():
-            knn_copies = _mix_in(_mix_in(knn_copies, matched, windows), regressed, own)
+            knn_copies = _mix_in(_mix_in(_mix_in(knn_copies, matched, windows), regressed, own),
+                                 patterned, by_partner)
         copies = _blend(knn_copies, on_copies, weight)
         with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
@@ -434,11 +463,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             (p, a), (0.0, 0.0, per_sample[p] * harder(p, a, b)))
         rest = 1 - spline_share - pattern_share
         kb_share = weight[p] * rest
+        models = kb_share * (1 - by_partner[p])  # the models, the windows and the regression
         accounts.append(GapAccount(
             motion.names[p], a, b, rigid=float((1 - weight[p]) * rest),
-            models=float(kb_share * (1 - windows[p]) * (1 - own[p])),
-            windows=float(kb_share * windows[p] * (1 - own[p])), own=float(kb_share * own[p]),
-            spline=float(spline_share), pattern=float(pattern_share),
+            models=float(models * (1 - windows[p]) * (1 - own[p])),
+            windows=float(models * windows[p] * (1 - own[p])), own=float(models * own[p]),
+            spline=float(spline_share), pattern=float(pattern_share + kb_share * by_partner[p]),
             estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
     return _with_fill(motion, out), accounts
 
@@ -770,6 +800,18 @@ def _carried_closely(missing, spread, within, fps):
         longer[a:b + 1, p] = b - a + 1 > shortest
     with np.errstate(invalid="ignore"):
         return longer & (spread <= within)
+
+
+def _offset_variance(missing, donors):
+    """Per point, the least variance of its offset to a partner seen through all of its gaps,
+    from the pattern's donor statistics (``donors``, :func:`~.baselines.fill_pattern`'s cache);
+    0 for points it has none of."""
+    out = np.zeros(missing.shape[1])
+    for p, variance in donors.items():
+        usable = ~missing[missing[:, p]].any(axis=0)
+        least = np.min(np.where(usable, variance, np.inf))
+        out[p] = least if np.isfinite(least) else 0.0
+    return out
 
 
 def _spread_floor(missing, probe, spread):
