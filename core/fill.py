@@ -57,11 +57,12 @@ AUTO_SPREAD_CAP = 2.0
 #: (:func:`~.regression.regress_points`), weighted by its errors on the copies (on shorter gaps
 #: and on marker sets it misled the copies: docs/METHOD_NOTES.md, "Session 22")
 AUTO_MATCH_SECONDS = 1.0
-#: and there a partner's pattern (:func:`~.baselines.fill_pattern`) joins the knowledge base's
-#: estimate too where it refills the copies better still, its error on them raised to at least
-#: this many times the variance of its offset to its steadiest partner seen through the gaps:
-#: short copies of a limb gone for seconds flatter a partner whose offset wanders (a leg follows
-#: the other through jumps and squats, not through a walk; docs/METHOD_NOTES.md, "Session 41")
+#: on those points a partner's pattern (:func:`~.baselines.fill_pattern`) joins the knowledge
+#: base's estimate too where it refills the copies better still, its error on them raised to at
+#: least this many times the variance of its offset to its steadiest partner seen through the
+#: gaps: short copies of a limb gone for seconds flatter a partner whose offset wanders (a leg
+#: follows the other through jumps and squats, not through a walk; docs/METHOD_NOTES.md,
+#: "Session 41")
 AUTO_PATTERN_FLOOR = 0.5
 #: gaps of at most this many seconds are also blended with a spline through the take
 #: (:func:`_with_spline`), by its error on up to ``AUTO_SPLINE_COPIES`` copies of each gap, kept
