@@ -383,19 +383,13 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                 windows = np.nan_to_num(e_knn / (e_knn + e_match), nan=1.0)  # their share
                 e_kb = 1.0 / (1.0 / e_knn + 1.0 / e_match)
             # the take's own regression joins the knowledge base's estimate by its error
-            e_own = np.where(long, on_copies_of(regressed), np.inf)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                own = (1.0 / e_own) / (1.0 / e_kb + 1.0 / e_own)  # its share
-                e_kb = 1.0 / (1.0 / e_kb + 1.0 / e_own)
-            own = np.nan_to_num(own)
+            own, e_kb = _joined(e_kb, np.where(long, on_copies_of(regressed), np.inf))
             # the partner's pattern where it refilled them better still, trusted no closer than
             # its offset wanders over the take
             e_pattern = np.maximum(on_copies_of(patterned), AUTO_PATTERN_FLOOR * probe.sum(
                 axis=0) * _offset_variance(missing, donors))
-            e_pattern = np.where(long & (e_pattern < e_kb), e_pattern, np.inf)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                by_partner = np.nan_to_num((1.0 / e_pattern) / (1.0 / e_kb + 1.0 / e_pattern))
-                e_kb = 1.0 / (1.0 / e_kb + 1.0 / e_pattern)
+            by_partner, e_kb = _joined(e_kb, np.where(long & (e_pattern < e_kb), e_pattern,
+                                                      np.inf))
         with np.errstate(invalid="ignore"):
             share = e_rigid / (e_kb + e_rigid)
         weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
@@ -801,6 +795,15 @@ def _carried_closely(missing, spread, within, fps):
         longer[a:b + 1, p] = b - a + 1 > shortest
     with np.errstate(invalid="ignore"):
         return longer & (spread <= within)
+
+
+def _joined(e_kb, e_other):
+    """Another estimate joined to the knowledge base's by inverse errors on the copies (per
+    point, squared errors ``e_kb`` and ``e_other``; inf: none): its share (0 where neither has a
+    finite error) and the joined estimate's error."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.nan_to_num((1.0 / e_other) / (1.0 / e_kb + 1.0 / e_other))
+        return share, 1.0 / (1.0 / e_kb + 1.0 / e_other)
 
 
 def _offset_variance(missing, donors):
