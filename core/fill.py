@@ -64,6 +64,11 @@ AUTO_MATCH_SECONDS = 1.0
 #: follows the other through jumps and squats, not through a walk; docs/METHOD_NOTES.md,
 #: "Session 41")
 AUTO_PATTERN_FLOOR = 0.5
+#: the windows and the partner's pattern join only where they refilled the copies better than
+#: the rest of the knowledge base's estimate, their share opening gradually: 0 at equal errors,
+#: the full inverse-error share where that share is this far above one half (a step there let
+#: rounding at the thousandth of a mm flip a point's fill: docs/METHOD_NOTES.md, "Session 42")
+AUTO_JOIN_RAMP = 0.1
 #: gaps of at most this many seconds are also blended with a spline through the take
 #: (:func:`_with_spline`), by its error on up to ``AUTO_SPLINE_COPIES`` copies of each gap, kept
 #: ``AUTO_SPLINE_MARGIN`` frames from any gap and within ``AUTO_SPLINE_REACH`` gap lengths of
@@ -376,20 +381,16 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         seen = probe.any(axis=0)
         e_kb = e_knn  # of the knowledge base's estimate: the models, with the windows on long gaps
         if long.any():
-            e_match = on_copies_of(matched)
             # the windows join where they refilled the point's copies better than the models
-            e_match = np.where(long & (e_match < e_knn), e_match, np.inf)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                windows = np.nan_to_num(e_knn / (e_knn + e_match), nan=1.0)  # their share
-                e_kb = 1.0 / (1.0 / e_knn + 1.0 / e_match)
+            windows, e_kb = _joined(e_knn, np.where(long, on_copies_of(matched), np.inf),
+                                    AUTO_JOIN_RAMP)
             # the take's own regression joins the knowledge base's estimate by its error
             own, e_kb = _joined(e_kb, np.where(long, on_copies_of(regressed), np.inf))
             # the partner's pattern where it refilled them better still, trusted no closer than
             # its offset wanders over the take
             e_pattern = np.maximum(on_copies_of(patterned), AUTO_PATTERN_FLOOR * probe.sum(
                 axis=0) * _offset_variance(missing, donors))
-            by_partner, e_kb = _joined(e_kb, np.where(long & (e_pattern < e_kb), e_pattern,
-                                                      np.inf))
+            by_partner, e_kb = _joined(e_kb, np.where(long, e_pattern, np.inf), AUTO_JOIN_RAMP)
         with np.errstate(invalid="ignore"):
             share = e_rigid / (e_kb + e_rigid)
         weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
@@ -408,7 +409,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
         should_cancel=should_cancel, report=report).positions
     if long.any() and (windows > 0).any():
-        knn = _mix_in(knn, fill_match(given, kb, windows > 0, should_cancel).positions, windows)
+        # matched as on the copies, over every point with long gaps (the stretches and the
+        # take's own windows a point gets depend on which others are matched with it)
+        knn = _mix_in(knn, fill_match(given, kb, long, should_cancel).positions, windows)
         report(f"auto: windows of the knowledge base's motion join its models on "
                f"{int((windows > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
     if long.any() and (own > 0).any():
@@ -797,13 +800,20 @@ def _carried_closely(missing, spread, within, fps):
         return longer & (spread <= within)
 
 
-def _joined(e_kb, e_other):
+def _joined(e_kb, e_other, ramp=None):
     """Another estimate joined to the knowledge base's by inverse errors on the copies (per
     point, squared errors ``e_kb`` and ``e_other``; inf: none): its share (0 where neither has a
-    finite error) and the joined estimate's error."""
+    finite error) and the joined estimate's expected error. With ``ramp`` it joins only where
+    it refilled the copies better, its share opening from 0 at equal errors to the full inverse
+    error share where that share is ``ramp`` above one half (:data:`AUTO_JOIN_RAMP`)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.nan_to_num((1.0 / e_other) / (1.0 / e_kb + 1.0 / e_other))
-        return share, 1.0 / (1.0 / e_kb + 1.0 / e_other)
+        if ramp is not None:
+            share = share * np.clip((share - 0.5) / ramp, 0.0, 1.0)
+        # the two estimates' errors taken as independent (at the full share: 1 / (1/a + 1/b))
+        error = (np.where(share < 1, (1 - share) ** 2 * e_kb, 0.0)
+                 + np.where(share > 0, share ** 2 * e_other, 0.0))
+    return share, error
 
 
 def _offset_variance(missing, donors):
