@@ -40,6 +40,11 @@ RIGID_DONORS = 3
 #: metres: a point's donors form a rigid body with it where each stays this steady (SD of the
 #: distance) against it and the other donors (:func:`_donors`; tuned, docs/METHOD_NOTES.md)
 RIGID_TOGETHER = 0.005
+#: metres: donors steadier than this against a point (SD of the distance) are alike to
+#: :func:`_donors` (on a skeleton many joints ride exactly on one segment and their spreads
+#: differ by rounding alone), which takes them in the order of :func:`_alike_first` and weighs
+#: them alike
+RIGID_TIE = 1e-4
 #: metres added (in quadrature) to the donors' spread when two rigid estimates are weighed
 SPREAD_FLOOR = 0.005
 #: (gap, donor set) pairs times frames that the search for the gaps' nearest references looks at
@@ -152,9 +157,9 @@ def fill_intercorrelation(pos, variance=0.99, iterations=30, tol=1e-6):
 
 
 def _pair_stats(pos, p, seen):
-    """For point ``p`` against every point: the standard deviation of their distance and the
-    total variance of their offset over the frames where both are seen (inf where fewer than
-    10 such frames, and for ``p`` itself)."""
+    """For point ``p`` against every point: the standard deviation of their distance, the
+    total variance of their offset and their mean distance over the frames where both are seen
+    (inf where fewer than 10 such frames, and for ``p`` itself)."""
     both = seen & seen[:, p:p + 1]
     count = both.sum(axis=0)
     offset = np.where(both[..., None], pos - pos[:, p:p + 1], 0.0)
@@ -167,7 +172,8 @@ def _pair_stats(pos, p, seen):
                       / count)
     bad = count < 10
     bad[p] = True
-    return np.where(bad, np.inf, dist_sd), np.where(bad, np.inf, offset_var)
+    return (np.where(bad, np.inf, dist_sd), np.where(bad, np.inf, offset_var),
+            np.where(bad, np.inf, mean_d))
 
 
 def _gap_ends(a, b, frames):
@@ -222,10 +228,11 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
             runs.setdefault(p, []).append((a, b))
     partner_seen = np.isfinite(partners[..., 0])
 
-    def spread_of(q):  # every point's spread against q, once per take
+    def spread_of(q, of="spread"):  # every point's spread (or distance) against q, once per take
         if ("spread", q) not in stats:
-            stats[("spread", q)] = _pair_stats(partners, q, partner_seen)[0]
-        return stats[("spread", q)]
+            spread, _, distance = _pair_stats(partners, q, partner_seen)
+            stats[("spread", q)], stats[("distance", q)] = spread, distance
+        return stats[(of, q)]
 
     for p, gaps in runs.items():
         if should_cancel and should_cancel():
@@ -233,12 +240,15 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
         if p not in stats:  # the partners' spread, the partners steadiest first, and the pairs'
             spread = spread_of(p)
             order = np.flatnonzero(np.isfinite(spread))
-            order = order[np.argsort(spread[order], kind="stable")]
+            order = order[np.argsort(np.maximum(spread[order], RIGID_TIE), kind="stable")]
             # a second copy of a donor adds nothing to its fit but a turn about the others
             if "same" not in stats:
                 stats["same"] = same_points(partners)
-            kept = [j for i, j in enumerate(order) if not stats["same"][j, order[:i]].any()]
-            stats[p] = spread, np.array(kept, dtype=int), _mutual(spread, kept, spread_of)
+            kept = np.array([j for i, j in enumerate(order)
+                             if not stats["same"][j, order[:i]].any()], dtype=int)
+            mutual = _mutual(spread, kept, spread_of)
+            first = _alike_first(spread[kept], spread_of(p, "distance")[kept], mutual)
+            stats[p] = spread, kept[first], mutual[np.ix_(first, first)]
         estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
         if reach:
             estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, stats[p], donors,
@@ -323,7 +333,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     with np.errstate(invalid="ignore", divide="ignore"):
         late = np.where(two, (t - refs[:, 0]) / (refs[:, 1] - refs[:, 0]), 0.0)
     weights = np.stack([np.where(two, 1 - late, 1.0), late], axis=1)
-    w = 1 / np.maximum(costs, 1e-4) ** 2 if weighted else np.ones(chosen.shape)
+    w = 1 / np.maximum(costs, RIGID_TIE) ** 2 if weighted else np.ones(chosen.shape)
     w /= w.sum(axis=1, keepdims=True)
     cw = w[..., None]  # (rows, donors, 1)
     cur = pos[t[:, None], chosen]  # (rows, donors, 3)
@@ -358,6 +368,18 @@ def _mutual(spread, order, spread_of):
     return mutual
 
 
+def _alike_first(spread, distance, mutual):
+    """The order in which candidate donors (steadiest first; ``spread`` against the point,
+    ``distance`` to it on the mean, ``mutual`` spreads) are taken: those steadier than
+    :data:`RIGID_TIE`, alike to :func:`_donors`, with the most others of them steady against
+    them first, then the nearest. On a skeleton the joints up and down the chain from a point
+    keep their distance to it too (a bone's length) but turn about it; the joints of its own
+    segment are steady against each other as well."""
+    alike = spread <= RIGID_TIE
+    together = (alike[:, None] & alike[None] & (mutual <= RIGID_TIE)).sum(axis=1)
+    return np.lexsort((distance, -together, np.maximum(spread, RIGID_TIE)))
+
+
 def _donors(ok, spread, mutual, donors):
     """Per row of candidates ``ok`` ((rows, candidates) bool; ``spread``: theirs against the point,
     ``mutual``: theirs against each other), the places of its ``donors`` among the candidates and
@@ -381,7 +403,7 @@ def _steadiest(ok, spread, mutual, donors):
     cost = np.where(ok, spread[None], np.inf)
     places, costs = [], []
     for _ in range(donors):
-        pick = np.argmin(cost, axis=1)
+        pick = np.argmin(np.maximum(cost, RIGID_TIE), axis=1)
         places.append(pick)
         costs.append(cost[rows, pick])
         cost[rows, pick] = np.inf

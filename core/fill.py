@@ -501,10 +501,10 @@ def _harder_for_partners(missing, probe, spread, copies_spread, weight):
         if copies_spread is None:
             on_copies = np.full(missing.shape[1], np.nan)
         else:
-            at_copies = np.where(probe, copies_spread ** 2, np.nan)
+            at_copies = np.where(probe, copies_spread ** 2 + baselines.SPREAD_FLOOR ** 2, np.nan)
             on_copies = np.nansum(at_copies, axis=0) / np.sum(np.isfinite(at_copies), axis=0)
     # running sums over frames of the gaps' squared spread and of the frames that have one
-    squared = spread ** 2
+    squared = spread ** 2 + baselines.SPREAD_FLOOR ** 2
     known = np.isfinite(squared)
     sums = np.vstack([np.zeros((1, missing.shape[1])), np.cumsum(np.where(known, squared, 0),
                                                                  axis=0)])
