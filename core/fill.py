@@ -492,9 +492,11 @@ def _lacking_line(motion, out, lacking, no_kb):
 def _harder_for_partners(missing, probe, spread, copies_spread, weight):
     """``harder(p, a, b)``: how much harder than its copies the gap ``a``-``b`` of point ``p`` is
     for the fill, as a factor of the copies' squared error: the rigid estimate's share of it
-    scaled by its donors' mean squared spread over the gap against over the copies (one of a
-    point's gaps whose steadiest partners are out of sight too is filled worse than the copies
-    foretell), the knowledge base's share as it is. Where either spread is unknown, 1. On the
+    scaled by its donors' mean squared spread over the gap against over the copies, each with
+    :data:`~.baselines.SPREAD_FLOOR` added in quadrature (one of a point's gaps whose steadiest
+    partners are out of sight too is filled worse than the copies foretell; a skeleton's copies
+    carried by an exactly rigid segment have a spread of rounding alone), the knowledge base's
+    share as it is. Where either spread is unknown, 1. On the
     CMU marker tuning takes this ranked each take's gaps closer to how they came out (Spearman
     0.50-0.52 -> 0.56-0.60; docs/METHOD_NOTES.md, session 34)."""
     with np.errstate(invalid="ignore", divide="ignore"):
