@@ -278,7 +278,8 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     """Rigid estimates of point ``p`` over its gaps ``runs`` ((first, last) frames, inclusive)
     and their donors' RMS spread, one row per gap frame in the order of ``runs`` (NaN where
     none). ``steady``: every point's spread against ``p``, the points in order of it (the
-    steadiest first), and their spreads against each other (:func:`_mutual`). Per frame,
+    steadiest first, those alike as :func:`_alike_first` orders them), and their spreads
+    against each other (:func:`_mutual`). Per frame,
     ``donors`` seen there (:func:`_donors`), carried from the gap's ends (where the donors must
     be seen) or, given ``reach``, from the nearest frames within ``reach`` times the gap's
     length where ``p`` and the donors are seen; estimates from references either side are
