@@ -106,7 +106,8 @@ def test_rigid_donors_on_one_segment_do_not_hang_on_rounding(data_dir):
     were picked by it, so 1 um of noise picked others and, where some were gone (the copies
     `auto` scores on), carried a joint up to 15 mm elsewhere (CMU 07_05, 2 s gaps on 6 joints);
     `auto`'s share of the knowledge base followed (13_30: 19.6-21.8 mm). Donors steadier than
-    baselines.RIGID_TIE are alike now and taken in the points' order."""
+    baselines.RIGID_TIE are alike now and taken in an order that does not read the rounding
+    (baselines._alike_first)."""
     from mocap_gapfill.core.evaluate import punch_gaps
 
     take = read_motion(data_dir / "cmu/bvh/daz_friendly/07/07_05.bvh.gz", skip_frames=6)

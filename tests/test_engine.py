@@ -610,7 +610,6 @@ def test_auto_accounts_for_each_gap_and_its_estimate_ranks_them(data_dir):
     assert fill(with_gaps(jump, miss), "linear", return_account=True)[1] is None
 
 
-
 def test_auto_gap_estimates_on_a_skeleton_stay_in_proportion(data_dir):
     """A skeleton's copies carried by an exactly rigid segment have a donor spread of rounding
     alone (1e-16 m): the estimate scaled by the gap's spread over it came to 1.5e13 mm for a
@@ -627,6 +626,7 @@ def test_auto_gap_estimates_on_a_skeleton_stay_in_proportion(data_dir):
     estimate = [1000 * a.estimate for a in accounts]  # metres
     print(max(realised), max(estimate))  # when written: 157 and 175 mm
     assert max(realised) < 200 and max(estimate) < 1000
+
 
 def test_auto_weighs_its_methods_with_a_cheaper_fill_of_the_copies(data_dir, monkeypatch):
     """The knowledge base's fill of the copies only weighs the methods: at 15 local models a
