@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from mocap_gapfill.core.errors import GapFillError, ParseError
-from mocap_gapfill.core.evaluate import (complete_take, kb_without, punch_gaps, rmse_mm,
-                                         subject_of, with_gaps)
+from mocap_gapfill.core.evaluate import (complete_take, kb_without, punch_gaps, real_gaps,
+                                         rmse_mm, subject_of, with_gaps)
 from mocap_gapfill.core.fill import (BASELINES, DEFAULT_METHOD, METHODS, TAKE_ALONE, fill,
                                      kb_for_take, validation_gaps)
 from mocap_gapfill.core.io import read_motion
@@ -331,6 +331,33 @@ def test_auto_refills_its_copies_with_what_rigid_partners_carry_seen(data_dir, m
     print(scores)
     assert scores["auto"] < 0.85 * scores["auto, copies without them"]
     assert scores["auto"] < 1.1 * scores["knn"]
+
+
+def test_auto_judges_a_markers_one_gap_on_more_than_one_copy(data_dir, monkeypatch):
+    """A marker with one gap had one copy of it to judge the methods on: 01_01's real gap
+    (RBAC, the take's last 0.25 s) on 135_02 at 60 fps, where the knowledge base and the rigid
+    partners refilled the copy alike (19 and 20 mm with the full KB), so ``auto`` blended them
+    half and half and made 24 mm of a gap the partners alone fill to 4.5 mm. A point with fewer
+    than two copies has its gaps copied again, further off. When written: 4.5 mm, 24.3 with
+    one copy (rigid 4.5, knn 44.8)."""
+    from mocap_gapfill.core import fill as fill_module
+
+    c3d = data_dir / "cmu/c3d"
+    kb = build_kb([c3d / "01_01.c3d", c3d / "85_02.c3d"], fps=60.0)
+    take = complete_take(read_motion(c3d / "135_02.c3d"), kb.names, 60.0)
+    source = read_motion(c3d / "01_01.c3d")
+    source = source.replace(positions=resample(source.positions, source.fps, 60.0), fps=60.0,
+                            filled=None)
+    miss = real_gaps(source, take.names, take.n_frames)
+    assert [(take.names[p], b + 1 - a) for p, a, b in gap_runs(miss)] == [("RBAC", 15)]
+    assert validation_gaps(miss, fill_module.AUTO_PROBES,
+                           fewest=fill_module.AUTO_FEWEST_COPIES).sum() == 30
+    query = with_gaps(take, miss)
+    scores = {m: rmse_mm(fill(query, m, kb=kb), take, miss) for m in ("auto", "rigid")}
+    monkeypatch.setattr(fill_module, "AUTO_FEWEST_COPIES", 1)
+    scores["auto, one copy"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
+    print(scores)
+    assert scores["auto"] < 1.1 * scores["rigid"] < 0.5 * scores["auto, one copy"]
 
 
 def test_auto_weighs_short_dropouts_of_a_skeleton_on_enough_copied_frames(daz_kb, data_dir,
