@@ -13,8 +13,7 @@
   sample, 3 points seen there carry it from each gap end by a best-fit rigid transform (Kabsch),
   the two estimates blended linearly across the gap: a rigid body with it where one is seen (each
   donor's distance to it and to the donors before it steady within 5 mm while seen), else the 3
-  whose distance to it varied least (on a marker set: to it and to the donors before it; copies
-  of one point counted once);
+  whose distance to it varied least (copies of one point counted once);
 - ``pattern``: pattern fill (Vicon Nexus "Pattern Fill"): the gap takes the shape of the donor
   trajectory, seen across the whole gap, whose offset to the point varied least while both were
   seen, offset-blended to the point's values at both gap ends;
@@ -244,17 +243,12 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
             order = order[np.argsort(np.maximum(spread[order], RIGID_TIE), kind="stable")]
             # a second copy of a donor adds nothing to its fit but a turn about the others
             if "same" not in stats:
-                stats["same"], stats["skeleton"] = same_points(partners), skeleton(partners)
+                stats["same"] = same_points(partners)
             kept = np.array([j for i, j in enumerate(order)
                              if not stats["same"][j, order[:i]].any()], dtype=int)
             mutual = _mutual(spread, kept, spread_of)
             first = _alike_first(spread[kept], spread_of(p, "distance")[kept], mutual)
-            mutual = mutual[np.ix_(first, first)]
-            # where the donors make no rigid body with the point: on a skeleton the steadiest
-            # against it alone (its chain neighbours), on a marker set against each other too
-            apart = np.zeros_like(mutual) if stats["skeleton"] else \
-                np.where(np.isfinite(mutual), mutual, 0.0)
-            stats[p] = spread, kept[first], mutual, apart
+            stats[p] = spread, kept[first], mutual[np.ix_(first, first)]
         estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
         if reach:
             estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, stats[p], donors,
@@ -264,24 +258,6 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
         out[frames, p] = estimate[rows]
         spreads[frames, p] = rms[rows]
     return (fill_linear(out) if only is None else out), spreads
-
-
-def skeleton(pos):
-    """Whether every point seen keeps its distance to some other point within :data:`RIGID_TIE`
-    (the joints of a skeleton, each a bone's length from the next; judged on at most 500 frames,
-    pairs seen together in 10 or more): no marker does, soft tissue moves more."""
-    sample = np.asarray(pos, dtype=np.float64)[::max(1, len(pos) // 500)]
-    seen = np.isfinite(sample[..., 0])
-    same = same_points(sample)
-    exact = np.zeros_like(same)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # pairs never seen together
-        for i in range(sample.shape[1]):
-            both = (seen & seen[:, i:i + 1]).sum(axis=0) >= 10
-            sd = np.nanstd(np.linalg.norm(sample - sample[:, i:i + 1], axis=2), axis=0)
-            exact[i] = both & (sd <= RIGID_TIE)
-    np.fill_diagonal(exact, False)
-    return bool((exact & ~same).any(axis=1)[seen.sum(axis=0) >= 10].all())
 
 
 def same_points(pos, tolerance=0.001):
@@ -302,9 +278,9 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     """Rigid estimates of point ``p`` over its gaps ``runs`` ((first, last) frames, inclusive)
     and their donors' RMS spread, one row per gap frame in the order of ``runs`` (NaN where
     none). ``steady``: every point's spread against ``p``, the points in order of it (the
-    steadiest first, those alike as :func:`_alike_first` orders them), their spreads against
-    each other (:func:`_mutual`) and those that count where they make no rigid body with it
-    (:func:`_donors`' ``apart``). Per frame, ``donors`` seen there (:func:`_donors`), carried from the gap's ends (where the donors must
+    steadiest first, those alike as :func:`_alike_first` orders them), and their spreads
+    against each other (:func:`_mutual`). Per frame,
+    ``donors`` seen there (:func:`_donors`), carried from the gap's ends (where the donors must
     be seen) or, given ``reach``, from the nearest frames within ``reach`` times the gap's
     length where ``p`` and the donors are seen; estimates from references either side are
     blended linearly across the gap. All gaps of the point are fitted at once (one batch of
@@ -316,7 +292,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     t = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length - a, length)
     estimate = np.full((len(t), 3), np.nan)
     rms = np.full(len(t), np.nan)
-    spread, order, mutual, apart = steady
+    spread, order, mutual = steady
     if len(order) < donors:
         return estimate, rms
     # the donors each gap may take: seen at its ends, or with the point within reach of them
@@ -337,7 +313,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
         hi = np.minimum(frames, b + 1 + far)
         allowed[after] &= both[hi[after]] > both[b[after] + 1]
     ok = seen[t][:, order] & allowed[gap]
-    places, costs = _donors(ok, spread[order], mutual, apart, donors)
+    places, costs = _donors(ok, spread[order], mutual, donors)
     rows = np.flatnonzero(np.isfinite(costs).all(axis=1))
     if not len(rows):
         return estimate, rms
@@ -405,22 +381,19 @@ def _alike_first(spread, distance, mutual):
     return np.lexsort((distance, -together, np.maximum(spread, RIGID_TIE)))
 
 
-def _donors(ok, spread, mutual, apart, donors):
+def _donors(ok, spread, mutual, donors):
     """Per row of candidates ``ok`` ((rows, candidates) bool; ``spread``: theirs against the point,
     ``mutual``: theirs against each other), the places of its ``donors`` among the candidates and
     their spread, (rows, donors) each (inf where fewer are there). A rigid body with the point
     first: the donors chosen one by one, each the steadiest against the point and the donors
-    before it, where all of that stays within :data:`RIGID_TOGETHER`; elsewhere the same without
-    the bound, with ``apart`` for ``mutual`` (:func:`rigid_estimates`: on a skeleton all 0, the
-    steadiest against the point alone; on a marker set ``mutual`` where known). A joint keeps its
-    distance to the next one down the chain (a bone's length) while that one turns about it:
-    three such partners are no rigid body, and where a rigid one rides with the point (a clavicle
-    with the back) the fit through them swung it 180 mm off; where none does (a knee) they are
-    still the best guess. Markers on soft tissue have no such chain, and donors that keep their
-    distances to each other as well turn the point less wrongly."""
+    before it, where all of that stays within :data:`RIGID_TOGETHER`; elsewhere the steadiest
+    against the point alone. A joint keeps its distance to the next one down the chain (a bone's
+    length) while that one turns about it: three such partners are no rigid body, and where a
+    rigid one rides with the point (a clavicle with the back) the fit through them swung it 180
+    mm off; where none does (a knee) they are still the best guess."""
     places, costs = _steadiest(ok, spread, mutual, donors)
     loose = ~(costs.max(axis=1) <= RIGID_TOGETHER)
-    places[loose], costs[loose] = _steadiest(ok[loose], spread, apart, donors)
+    places[loose], costs[loose] = _steadiest(ok[loose], spread, np.zeros_like(mutual), donors)
     return places, costs
 
 

@@ -145,32 +145,6 @@ def test_rigid_donors_of_the_segment_before_a_joint_down_the_chain():
         np.testing.assert_allclose(out[80:140, 0], pos[80:140, 0], atol=1e-9)
 
 
-def test_loose_marker_donors_keep_their_distances_to_each_other(data_dir, monkeypatch):
-    """Where no rigid body rides with a marker (its steadiest partners on soft tissue move by
-    more than baselines.RIGID_TOGETHER against it or each other), its donors were the three
-    steadiest against it alone, however they moved against each other; on a marker set they
-    are now chosen steady against each other too (a skeleton keeps the old choice: a knee's
-    chain neighbours, a bone's length away, are still its best guess). Tuning takes 02_05,
-    30 % of the markers gone per half second at 120 fps; whether a take is a skeleton is read
-    from its data (HDM05's head and pelvis markers are rigid to 0.04 mm, but not every marker
-    has such a partner)."""
-    from mocap_gapfill.core.evaluate import complete_take, punch_gaps
-
-    takes = {name: read_motion(data_dir / path) for name, path in (
-        ("daz", "cmu/bvh/daz_friendly/07/07_05.bvh.gz"), ("asf", "cmu/asfamc/07/07_05.amc"),
-        ("cmu", "cmu/c3d/02_05.c3d"), ("hdm05", "hdm05/c3d/HDM_bd_05-01_01_120.c3d"))}
-    assert [baselines.skeleton(t.positions) for t in takes.values()] == [True, True, False, False]
-    take = complete_take(takes["cmu"], None, 120.0)
-    miss = punch_gaps(take.n_frames, take.n_points, "markers", 0.3,
-                      np.random.default_rng([0, *b"rate=0.3"]), take.names)
-    query = with_gaps(take, miss)
-    apart = rmse_mm(fill(query, "rigid"), take, miss)
-    monkeypatch.setattr(baselines, "skeleton", lambda pos: True)
-    alone = rmse_mm(fill(query, "rigid"), take, miss)
-    print(apart, alone)  # when written: 42.7 and 48.9 mm
-    assert apart < 0.93 * alone
-
-
 def test_rigid_fill_falls_back_to_linear_without_three_donors():
     pos = _tumbling_body()[:, [0, 1, 6]]  # two body points and the loose one
     gappy = pos.copy()
