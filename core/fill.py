@@ -26,14 +26,12 @@ TAKE_ALONE = "auto fills from the take alone (rigid partners, a spline, a partne
 #: validation gaps (copies of its gaps) per point for ``auto``, and for skeleton joints more where
 #: those hold fewer frames than ``AUTO_PROBE_FRAMES`` (five copies of 3-frame dropouts weigh the
 #: methods on 15 samples; on marker sets rigid partners carry nearly every marker with short
-#: gaps alone either way, and the extra copies only cost time: docs/METHOD_NOTES.md), its gaps
-#: copied again, further off, where it has too few of them
+#: gaps alone either way, and the extra copies only cost time: docs/METHOD_NOTES.md); a point
+#: whose copies hold fewer frames, markers too, has its gaps copied again, further off (one copy
+#: alone misjudged a marker's one gap, the last 15 frames of a take: 24 mm where its rigid
+#: partners alone made 4.5; docs/METHOD_NOTES.md, session 44)
 AUTO_PROBES = 5
 AUTO_PROBE_FRAMES = 30
-#: copies per marker at the least: a marker with fewer gaps has them copied again, further off
-#: (one copy alone misjudged a marker's one gap, the last 15 frames of a take: 24 mm where its
-#: rigid partners alone made 4.5; docs/METHOD_NOTES.md, session 44)
-AUTO_FEWEST_COPIES = 2
 #: donors of ``auto``'s rigid-body estimate
 AUTO_DONORS = 3
 #: ``auto`` lets rigid partners alone carry a point whose copies they refill better than the
@@ -308,9 +306,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     # without a knowledge base the take alone fills: rigid partners, a spline, a partner's pattern
     lacking = list(motion.names) if kb is None else match_names(kb, motion.names)[1]
     missing = motion.missing
-    # skeleton joints: copies until they hold enough frames; markers: enough copies
-    least, fewest = (0, AUTO_FEWEST_COPIES) if motion.parents is None else (AUTO_PROBE_FRAMES, 1)
-    probe = validation_gaps(missing, AUTO_PROBES, least=least, fewest=fewest)
+    probe = validation_gaps(missing, AUTO_PROBES,
+                            least=0 if motion.parents is None else AUTO_PROBE_FRAMES,
+                            enough=AUTO_PROBE_FRAMES)
     with np.errstate(invalid="ignore"):
         long = (probe.any(axis=0) & (_mean_run(missing) >= AUTO_MATCH_SECONDS * motion.fps)
                 & (motion.parents is not None) & (kb is not None))
@@ -853,15 +851,15 @@ def _mean_run(mask):
         return mask.sum(axis=0) / runs
 
 
-def validation_gaps(missing, per_point=3, margin=10, least=0, fewest=1):
+def validation_gaps(missing, per_point=3, margin=10, least=0, enough=0):
     """Copies of the gaps where their points are observed: for each gap of each point, the
     nearest shift (by at least the gap's length plus ``margin``) that lands on observed frames
     with an observed frame on either side, ``per_point`` per point, more where those hold fewer
-    than ``least`` frames; a point with too few gaps for that, or for ``fewest`` copies, has its
-    gaps copied again, each at the nearest shift left (as long as there is room). A gap of
-    several points at the same frames lands at the same shift for all of them when it can.
-    Where a take has no room for a full-length copy of a point's gaps, half (then a quarter) of
-    the length is tried, down to 4 frames."""
+    than ``least`` frames; a point whose copies hold fewer than ``enough`` frames (or ``least``)
+    when its gaps run out has them copied again, each at the nearest shift left, as long as
+    there is room. A gap of several points at the same frames lands at the same shift for all of
+    them when it can. Where a take has no room for a full-length copy of a point's gaps, half
+    (then a quarter) of the length is tried, down to 4 frames."""
     probe = np.zeros_like(missing)
     runs = sorted(gap_runs(missing), key=lambda r: (r[1], r[2], r[0]))
     count = np.zeros(missing.shape[1], dtype=int)
@@ -873,7 +871,7 @@ def validation_gaps(missing, per_point=3, margin=10, least=0, fewest=1):
             for p, a, b in runs:
                 length = (b - a + 1) // shrink
                 if ((count[p] >= per_point and copied[p] >= least)
-                        or (again and count[p] >= fewest and copied[p] >= least)
+                        or (again and copied[p] >= max(least, enough))
                         or (shrink > 1 and count[p]) or length < min(4, b - a + 1)):
                     continue
                 start = _copy_start(missing[:, p] | probe[:, p], a, length, margin)

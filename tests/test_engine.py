@@ -337,9 +337,9 @@ def test_auto_judges_a_markers_one_gap_on_more_than_one_copy(data_dir, monkeypat
     """A marker with one gap had one copy of it to judge the methods on: 01_01's real gap
     (RBAC, the take's last 0.25 s) on 135_02 at 60 fps, where the knowledge base and the rigid
     partners refilled the copy alike (19 and 20 mm with the full KB), so ``auto`` blended them
-    half and half and made 24 mm of a gap the partners alone fill to 4.5 mm. A point with fewer
-    than two copies has its gaps copied again, further off. When written: 4.5 mm, 24.3 with
-    one copy (rigid 4.5, knn 44.8)."""
+    half and half and made 24 mm of a gap the partners alone fill to 4.5 mm. A point whose
+    copies hold fewer than fill.AUTO_PROBE_FRAMES frames has its gaps copied again, further
+    off. When written: 4.5 mm, 24.3 with one copy (rigid 4.5, knn 44.8)."""
     from mocap_gapfill.core import fill as fill_module
 
     c3d = data_dir / "cmu/c3d"
@@ -351,10 +351,10 @@ def test_auto_judges_a_markers_one_gap_on_more_than_one_copy(data_dir, monkeypat
     miss = real_gaps(source, take.names, take.n_frames)
     assert [(take.names[p], b + 1 - a) for p, a, b in gap_runs(miss)] == [("RBAC", 15)]
     assert validation_gaps(miss, fill_module.AUTO_PROBES,
-                           fewest=fill_module.AUTO_FEWEST_COPIES).sum() == 30
+                           enough=fill_module.AUTO_PROBE_FRAMES).sum() == 30
     query = with_gaps(take, miss)
     scores = {m: rmse_mm(fill(query, m, kb=kb), take, miss) for m in ("auto", "rigid")}
-    monkeypatch.setattr(fill_module, "AUTO_FEWEST_COPIES", 1)
+    monkeypatch.setattr(fill_module, "AUTO_PROBE_FRAMES", 0)
     scores["auto, one copy"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
     print(scores)
     assert scores["auto"] < 1.1 * scores["rigid"] < 0.5 * scores["auto, one copy"]
