@@ -13,7 +13,8 @@
   sample, 3 points seen there carry it from each gap end by a best-fit rigid transform (Kabsch),
   the two estimates blended linearly across the gap: a rigid body with it where one is seen (each
   donor's distance to it and to the donors before it steady within 5 mm while seen), else the 3
-  whose distance to it varied least (copies of one point counted once);
+  whose distance to it varied least (on a marker set, 3 steady against each other too where
+  they turn it less wrongly; copies of one point counted once);
 - ``pattern``: pattern fill (Vicon Nexus "Pattern Fill"): the gap takes the shape of the donor
   trajectory, seen across the whole gap, whose offset to the point varied least while both were
   seen, offset-blended to the point's values at both gap ends;
@@ -243,12 +244,17 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
             order = order[np.argsort(np.maximum(spread[order], RIGID_TIE), kind="stable")]
             # a second copy of a donor adds nothing to its fit but a turn about the others
             if "same" not in stats:
-                stats["same"] = same_points(partners)
+                stats["same"], stats["between"], stats["skeleton"] = _pair_table(partners)
             kept = np.array([j for i, j in enumerate(order)
                              if not stats["same"][j, order[:i]].any()], dtype=int)
             mutual = _mutual(spread, kept, spread_of)
             first = _alike_first(spread[kept], spread_of(p, "distance")[kept], mutual)
-            stats[p] = spread, kept[first], mutual[np.ix_(first, first)]
+            kept, mutual = kept[first], mutual[np.ix_(first, first)]
+            # a marker set's loose donors may be taken steady against each other too
+            apart = None if stats["skeleton"] else (
+                np.where(np.isfinite(mutual), mutual, 0.0), spread_of(p, "distance")[kept],
+                stats["between"][np.ix_(kept, kept)])
+            stats[p] = spread, kept, mutual, apart
         estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
         if reach:
             estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, stats[p], donors,
@@ -264,22 +270,40 @@ def same_points(pos, tolerance=0.001):
     """(points, points) booleans: the pairs of points that are one, less than ``tolerance``
     (metres) apart on the mean while both are seen (e.g. HDM05's unlabelled ``*0 *1 *2``,
     copies of three labelled markers), judged on at most 500 frames."""
+    return _pair_table(pos, tolerance)[0]
+
+
+def _pair_table(pos, tolerance=0.001):
+    """On at most 500 frames: :func:`same_points`, every pair's mean distance while both are
+    seen (NaN where never), and whether the take is a skeleton: every point seen keeps its
+    distance to another (not its copy) within :data:`RIGID_TIE` over 10 frames or more, as a
+    skeleton's joints do, each a bone's length from the next; no marker on soft tissue does
+    (HDM05's head, thorax and pelvis markers are rigid to 0.04 mm among themselves, its limb
+    markers are not)."""
     sample = np.asarray(pos, dtype=np.float64)[::max(1, len(pos) // 500)]
+    seen = np.isfinite(sample[..., 0])
+    points = sample.shape[1]
+    mean, exact = np.full((points, points), np.nan), np.zeros((points, points), bool)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # pairs never seen together
-        same = np.array([np.nanmean(np.linalg.norm(sample - sample[:, i:i + 1], axis=2), axis=0)
-                         < tolerance for i in range(sample.shape[1])]).reshape(
-                             (sample.shape[1],) * 2)
+        for i in range(points):
+            distance = np.linalg.norm(sample - sample[:, i:i + 1], axis=2)
+            mean[i] = np.nanmean(distance, axis=0)
+            exact[i] = (((seen & seen[:, i:i + 1]).sum(axis=0) >= 10)
+                        & (np.nanstd(distance, axis=0) <= RIGID_TIE))
+    same = mean < tolerance
     np.fill_diagonal(same, False)
-    return same
+    np.fill_diagonal(exact, False)
+    skeleton = bool((exact & ~same).any(axis=1)[seen.sum(axis=0) >= 10].all())
+    return same, mean, skeleton
 
 
 def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     """Rigid estimates of point ``p`` over its gaps ``runs`` ((first, last) frames, inclusive)
     and their donors' RMS spread, one row per gap frame in the order of ``runs`` (NaN where
     none). ``steady``: every point's spread against ``p``, the points in order of it (the
-    steadiest first, those alike as :func:`_alike_first` orders them), and their spreads
-    against each other (:func:`_mutual`). Per frame,
+    steadiest first, those alike as :func:`_alike_first` orders them), their spreads against
+    each other (:func:`_mutual`) and, on a marker set, :func:`_donors`' ``apart``. Per frame,
     ``donors`` seen there (:func:`_donors`), carried from the gap's ends (where the donors must
     be seen) or, given ``reach``, from the nearest frames within ``reach`` times the gap's
     length where ``p`` and the donors are seen; estimates from references either side are
@@ -292,7 +316,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     t = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length - a, length)
     estimate = np.full((len(t), 3), np.nan)
     rms = np.full(len(t), np.nan)
-    spread, order, mutual = steady
+    spread, order, mutual, apart = steady
     if len(order) < donors:
         return estimate, rms
     # the donors each gap may take: seen at its ends, or with the point within reach of them
@@ -313,7 +337,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
         hi = np.minimum(frames, b + 1 + far)
         allowed[after] &= both[hi[after]] > both[b[after] + 1]
     ok = seen[t][:, order] & allowed[gap]
-    places, costs = _donors(ok, spread[order], mutual, donors)
+    places, costs = _donors(ok, spread[order], mutual, donors, apart)
     rows = np.flatnonzero(np.isfinite(costs).all(axis=1))
     if not len(rows):
         return estimate, rms
@@ -381,7 +405,7 @@ def _alike_first(spread, distance, mutual):
     return np.lexsort((distance, -together, np.maximum(spread, RIGID_TIE)))
 
 
-def _donors(ok, spread, mutual, donors):
+def _donors(ok, spread, mutual, donors, apart=None):
     """Per row of candidates ``ok`` ((rows, candidates) bool; ``spread``: theirs against the point,
     ``mutual``: theirs against each other), the places of its ``donors`` among the candidates and
     their spread, (rows, donors) each (inf where fewer are there). A rigid body with the point
@@ -390,11 +414,38 @@ def _donors(ok, spread, mutual, donors):
     against the point alone. A joint keeps its distance to the next one down the chain (a bone's
     length) while that one turns about it: three such partners are no rigid body, and where a
     rigid one rides with the point (a clavicle with the back) the fit through them swung it 180
-    mm off; where none does (a knee) they are still the best guess."""
+    mm off; where none does (a knee) they are still the best guess.
+
+    Markers on soft tissue have no such chain (``apart``, given for a marker set: ``mutual``
+    with 0 where unknown, the candidates' mean distance to the point and to each other): there
+    three donors chosen as the rigid body is, without its bound, are taken instead where they
+    promise the point a smaller error (:func:`_turn_error`); donors steady against each other
+    may lie along one limb (elbow, wrist, finger), about which the fit turns freely."""
     places, costs = _steadiest(ok, spread, mutual, donors)
-    loose = ~(costs.max(axis=1) <= RIGID_TOGETHER)
+    loose = np.flatnonzero(~(costs.max(axis=1) <= RIGID_TOGETHER))
     places[loose], costs[loose] = _steadiest(ok[loose], spread, np.zeros_like(mutual), donors)
+    if apart is None or donors != 3 or not len(loose):
+        return places, costs
+    known, to_point, between = apart
+    other, other_costs = _steadiest(ok[loose], spread, known, donors)
+    pairs = [known[places[loose, i], places[loose, j]] for i, j in ((0, 1), (0, 2), (1, 2))]
+    worst = np.maximum.reduce([costs[loose].max(axis=1), *pairs])
+    better = (_turn_error(other, other_costs.max(axis=1), to_point, between)
+              < _turn_error(places[loose], worst, to_point, between))
+    places[loose[better]], costs[loose[better]] = other[better], other_costs[better]
     return places, costs
+
+
+def _turn_error(places, worst, to_point, between):
+    """What three donors (``places``, rows of 3) promise a point they carry, up to a factor:
+    their worst spread ``worst`` times the point's mean distance from them over the least
+    height of their triangle (``to_point``, ``between``: mean distances), the lever by which a
+    turn about the triangle's longest side, which the spread leaves free, moves the point."""
+    a, b, c = (between[places[:, i], places[:, j]] for i, j in ((0, 1), (1, 2), (0, 2)))
+    half = (a + b + c) / 2
+    area = np.sqrt(np.maximum(half * (half - a) * (half - b) * (half - c), 0.0))
+    height = 2 * area / np.maximum(np.maximum(a, b), c)
+    return worst * to_point[places].mean(axis=1) / np.maximum(height, 1e-6)
 
 
 def _steadiest(ok, spread, mutual, donors):
