@@ -440,11 +440,14 @@ def _turn_error(places, worst, to_point, between):
     """What three donors (``places``, rows of 3) promise a point they carry, up to a factor:
     their worst spread ``worst`` times the point's mean distance from them over the least
     height of their triangle (``to_point``, ``between``: mean distances), the lever by which a
-    turn about the triangle's longest side, which the spread leaves free, moves the point."""
+    turn about the triangle's longest side, which the spread leaves free, moves the point. NaN
+    where there is no triangle (a row without candidates names one place thrice; pairs never
+    seen together): it compares as no better."""
     a, b, c = (between[places[:, i], places[:, j]] for i, j in ((0, 1), (1, 2), (0, 2)))
     half = (a + b + c) / 2
     area = np.sqrt(np.maximum(half * (half - a) * (half - b) * (half - c), 0.0))
-    height = 2 * area / np.maximum(np.maximum(a, b), c)
+    with np.errstate(invalid="ignore"):  # 0 / 0 where the three places are one
+        height = 2 * area / np.maximum(np.maximum(a, b), c)
     return worst * to_point[places].mean(axis=1) / np.maximum(height, 1e-6)
 
 

@@ -183,6 +183,25 @@ def test_loose_marker_donors_steady_against_each_other_where_they_turn_it_less(d
     assert apart < 0.93 * alone
 
 
+def test_loose_marker_donors_of_a_frame_with_too_few_candidates_warn_of_nothing():
+    """A gap frame where fewer than three candidates are seen has no three donors: the row is
+    left without them, and weighing the two triples of a marker set
+    (:func:`baselines._turn_error`, no triangle there) raises no RuntimeWarning (one reached the
+    console from the fill of 135_02 with the rigid estimate from the gap ends alone)."""
+    import warnings
+
+    spread = np.array([0.01, 0.02, 0.03])
+    mutual = np.full((3, 3), np.inf)  # no rigid body: the marker set's loose donors
+    between = np.array([[0, 0.1, 0.2], [0.1, 0, 0.15], [0.2, 0.15, 0]])
+    apart = (np.zeros((3, 3)), np.full(3, 0.1), between)
+    ok = np.array([[True, True, True], [True, False, True], [False, False, False]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        places, costs = baselines._donors(ok, spread, mutual, 3, apart)
+    assert np.isfinite(costs[0]).all() and sorted(places[0]) == [0, 1, 2]
+    assert not np.isfinite(costs[1:]).all(axis=1).any()
+
+
 def test_rigid_fill_falls_back_to_linear_without_three_donors():
     pos = _tumbling_body()[:, [0, 1, 6]]  # two body points and the loose one
     gappy = pos.copy()
