@@ -278,8 +278,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     knowledge base where whole segments or long stretches are gone. The donors are chosen and
     weighted by how steady their distance to the point is over the take
     (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate also reaches past the
-    gap's ends (:data:`AUTO_REACH`). Copies shorter than the gaps do not vouch for the rigid
-    estimate beyond its donors' spread (:data:`AUTO_SPREAD_CAP`). On points with long gaps
+    gap's ends (:data:`AUTO_REACH`), and its error on the copies is scaled at each frame by how
+    far its donors stray there against at the copies (:func:`_by_steadiness`). Copies shorter
+    than the gaps do not vouch for the rigid estimate beyond its donors' spread
+    (:data:`AUTO_SPREAD_CAP`). On points with long gaps
     (:data:`AUTO_MATCH_SECONDS`) the knowledge base's estimate is its models' fill and its
     windows of motion (:func:`~.matching.fill_match`) weighted by their errors on the copies,
     the windows only where they refill them better, and then the take's own regression of the
@@ -431,7 +433,11 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         report(f"auto: a partner's pattern joins the knowledge base's estimate on "
                f"{int((by_partner > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or "
                f"more")
-    out = _blend(knn, rigid, weight)
+    # the knowledge base's share per frame: on a marker set it follows the rigid donors' spread
+    shares = np.broadcast_to(weight, missing.shape)
+    if probe.any() and motion.parents is None:
+        shares = _by_steadiness(weight, e_kb, e_rigid, probe, spread, copies_spread)
+    out = _blend(knn, rigid, shares)
     if probe.any():
         if long.any():
             knn_copies = _mix_in(_mix_in(_mix_in(knn_copies, matched, windows), regressed, own),
@@ -459,15 +465,16 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     if lacking:
         report(_lacking_line(motion, out, lacking, kb is None))
     accounts = []
-    harder = _harder_for_partners(missing, probe, spread, copies_spread, weight)
+    harder = _harder_for_partners(missing, probe, spread, copies_spread)
     for p, a, b in gap_runs(missing):
+        kb_side = float(shares[a:b + 1, p].mean())
         spline_share, pattern_share, squared = eased.get(
-            (p, a), (0.0, 0.0, per_sample[p] * harder(p, a, b)))
+            (p, a), (0.0, 0.0, per_sample[p] * harder(p, a, b, kb_side)))
         rest = 1 - spline_share - pattern_share
-        kb_share = weight[p] * rest
+        kb_share = kb_side * rest
         models = kb_share * (1 - by_partner[p])  # the models, the windows and the regression
         accounts.append(GapAccount(
-            motion.names[p], a, b, rigid=float((1 - weight[p]) * rest),
+            motion.names[p], a, b, rigid=float((1 - kb_side) * rest),
             models=float(models * (1 - windows[p]) * (1 - own[p])),
             windows=float(models * windows[p] * (1 - own[p])), own=float(models * own[p]),
             spline=float(spline_share), pattern=float(pattern_share + kb_share * by_partner[p]),
@@ -493,39 +500,63 @@ def _lacking_line(motion, out, lacking, no_kb):
     return "auto: points the knowledge base lacks: " + (said or f"{', '.join(lacking)} (no gaps)")
 
 
-def _harder_for_partners(missing, probe, spread, copies_spread, weight):
-    """``harder(p, a, b)``: how much harder than its copies the gap ``a``-``b`` of point ``p`` is
-    for the fill, as a factor of the copies' squared error: the rigid estimate's share of it
-    scaled by its donors' mean squared spread over the gap against over the copies, each with
-    :data:`~.baselines.SPREAD_FLOOR` added in quadrature (one of a point's gaps whose steadiest
-    partners are out of sight too is filled worse than the copies foretell; a skeleton's copies
-    carried by an exactly rigid segment have a spread of rounding alone), the knowledge base's
-    share as it is. Where either spread is unknown, 1. On the
+def _harder_for_partners(missing, probe, spread, copies_spread):
+    """``harder(p, a, b, share)``: how much harder than its copies the gap ``a``-``b`` of point
+    ``p`` is for the fill, as a factor of the copies' squared error: the rigid estimate's part
+    of it (1 - ``share``, the knowledge base's share of the gap) scaled by its donors' mean
+    squared spread over the gap against over the copies (:func:`_squared_spreads`; one of a
+    point's gaps whose steadiest partners are out of sight too is filled worse than the copies
+    foretell), the knowledge base's part as it is. Where either spread is unknown, 1. On the
     CMU marker tuning takes this ranked each take's gaps closer to how they came out (Spearman
     0.50-0.52 -> 0.56-0.60; docs/METHOD_NOTES.md, session 34)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        if copies_spread is None:
-            on_copies = np.full(missing.shape[1], np.nan)
-        else:
-            at_copies = np.where(probe, copies_spread ** 2 + baselines.SPREAD_FLOOR ** 2, np.nan)
-            on_copies = np.nansum(at_copies, axis=0) / np.sum(np.isfinite(at_copies), axis=0)
-    # running sums over frames of the gaps' squared spread and of the frames that have one
-    squared = spread ** 2 + baselines.SPREAD_FLOOR ** 2
+    squared, on_copies = _squared_spreads(probe, spread, copies_spread)
     known = np.isfinite(squared)
     sums = np.vstack([np.zeros((1, missing.shape[1])), np.cumsum(np.where(known, squared, 0),
                                                                  axis=0)])
     counts = np.vstack([np.zeros((1, missing.shape[1])), np.cumsum(known, axis=0)])
 
-    def harder(p, a, b):
+    def harder(p, a, b, share):
         frames = counts[b + 1, p] - counts[a, p]
         if not frames or not on_copies[p] > 0:
             return 1.0
         ratio = (sums[b + 1, p] - sums[a, p]) / frames / on_copies[p]
         if not ratio > 0:
             return 1.0
-        return (1 - weight[p]) * ratio + weight[p]
+        return (1 - share) * ratio + share
 
     return harder
+
+
+def _squared_spreads(probe, spread, copies_spread):
+    """The rigid donors' squared spread at each frame (``spread``: (frames, points), NaN where
+    unknown) and each point's mean of it over its copies (``copies_spread`` at ``probe``; NaN
+    where unknown), each with :data:`~.baselines.SPREAD_FLOOR` added in quadrature (a
+    skeleton's copies carried by an exactly rigid segment have a spread of rounding alone)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if copies_spread is None:
+            on_copies = np.full(probe.shape[1], np.nan)
+        else:
+            at_copies = np.where(probe, copies_spread ** 2 + baselines.SPREAD_FLOOR ** 2, np.nan)
+            on_copies = np.nansum(at_copies, axis=0) / np.sum(np.isfinite(at_copies), axis=0)
+    return spread ** 2 + baselines.SPREAD_FLOOR ** 2, on_copies
+
+
+def _by_steadiness(weight, e_kb, e_rigid, probe, spread, copies_spread):
+    """Per frame (frames, points), the knowledge base's share of a marker set's points that
+    ``weight`` (per point) blends with the rigid estimate: the copies' inverse-error weights
+    with the rigid estimate's error on the copies (``e_rigid``; ``e_kb`` the knowledge base's)
+    scaled at each frame by its donors' squared spread there against their mean over the
+    copies (:func:`_squared_spreads`): a marker's copies vouch for its rigid partners only as
+    far as they stay as steady as at the copies (chosen on the CMU C3D tuning takes,
+    docs/METHOD_NOTES.md, session 45; a skeleton's joints did worse with it, session 34). Points
+    the partners carry alone, points the knowledge base alone fills and frames without a
+    spread keep ``weight``."""
+    squared, on_copies = _squared_spreads(probe, spread, copies_spread)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scaled = e_rigid[None] * squared / on_copies[None]
+        share = scaled / (e_kb[None] + scaled)
+    judged = (0 < weight) & (weight < 1) & np.isfinite(e_kb) & np.isfinite(e_rigid)
+    return np.where(judged[None] & np.isfinite(share), share, weight[None])
 
 
 def _mix_in(knn, other, share):
@@ -537,9 +568,9 @@ def _mix_in(knn, other, share):
 
 
 def _blend(kb, rigid, weight):
-    """``weight`` (per point) of the knowledge base's estimate and the rest of the rigid one;
-    where one of them has none, the other alone."""
-    w = np.broadcast_to(weight[None], kb.shape[:2]).copy()
+    """``weight`` (per point, or per frame and point) of the knowledge base's estimate and the
+    rest of the rigid one; where one of them has none, the other alone."""
+    w = np.broadcast_to(weight, kb.shape[:2]).copy()
     w[np.isnan(rigid[..., 0])] = 1.0
     w[np.isnan(kb[..., 0])] = 0.0
     out = np.where(np.isnan(kb), 0, kb) * w[..., None] + \
