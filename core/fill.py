@@ -111,8 +111,10 @@ class GapAccount:
     ``rigid`` (the rigid partners), ``models`` (the knowledge base's local models), ``windows``
     (the knowledge base's windows of motion), ``own`` (the take's own regression on the rest of
     the body), ``spline`` (a spline through the take, short gaps), ``pattern`` (a partner's
-    pattern: short gaps, and a point's long gaps within the knowledge base's side). Where an
-    estimate has no value at some frame (no rigid donors there) the others fill it alone.
+    pattern: short gaps, and a point's long gaps within the knowledge base's side); on a marker
+    set the rigid partners' share is their mean over the gap's frames (:func:`_by_steadiness`).
+    Where an estimate has no value at some frame (no rigid donors there) the others fill it
+    alone.
     ``estimate``: the fill's RMS error in metres on copies of the point's gaps (the point hidden
     where it is observed, refilled as the gaps were), its rigid part scaled to how far the rigid
     donors spread over this gap (:func:`_harder_for_partners`): what ``auto`` expects here, not
