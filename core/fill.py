@@ -435,10 +435,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         report(f"auto: a partner's pattern joins the knowledge base's estimate on "
                f"{int((by_partner > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or "
                f"more")
+    # the rigid donors' squared spread at each frame and on the mean of each point's copies
+    spreads = _squared_spreads(probe, spread, copies_spread)
     # the knowledge base's share per frame: on a marker set it follows the rigid donors' spread
     shares = np.broadcast_to(weight, missing.shape)
     if probe.any() and motion.parents is None:
-        shares = _by_steadiness(weight, e_kb, e_rigid, probe, spread, copies_spread)
+        shares = _by_steadiness(weight, e_kb, e_rigid, *spreads)
     out = _blend(knn, rigid, shares)
     if probe.any():
         if long.any():
@@ -467,7 +469,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     if lacking:
         report(_lacking_line(motion, out, lacking, kb is None))
     accounts = []
-    harder = _harder_for_partners(missing, probe, spread, copies_spread)
+    harder = _harder_for_partners(*spreads)
     for p, a, b in gap_runs(missing):
         kb_side = float(shares[a:b + 1, p].mean())
         spline_share, pattern_share, squared = eased.get(
@@ -502,20 +504,20 @@ def _lacking_line(motion, out, lacking, no_kb):
     return "auto: points the knowledge base lacks: " + (said or f"{', '.join(lacking)} (no gaps)")
 
 
-def _harder_for_partners(missing, probe, spread, copies_spread):
+def _harder_for_partners(squared, on_copies):
     """``harder(p, a, b, share)``: how much harder than its copies the gap ``a``-``b`` of point
     ``p`` is for the fill, as a factor of the copies' squared error: the rigid estimate's part
     of it (1 - ``share``, the knowledge base's share of the gap) scaled by its donors' mean
-    squared spread over the gap against over the copies (:func:`_squared_spreads`; one of a
-    point's gaps whose steadiest partners are out of sight too is filled worse than the copies
-    foretell), the knowledge base's part as it is. Where either spread is unknown, 1. On the
+    squared spread over the gap (``squared``, per frame) against over the copies
+    (``on_copies``, per point; both from :func:`_squared_spreads`; one of a point's gaps whose
+    steadiest partners are out of sight too is filled worse than the copies foretell), the
+    knowledge base's part as it is. Where either spread is unknown, 1. On the
     CMU marker tuning takes this ranked each take's gaps closer to how they came out (Spearman
     0.50-0.52 -> 0.56-0.60; docs/METHOD_NOTES.md, session 34)."""
-    squared, on_copies = _squared_spreads(probe, spread, copies_spread)
     known = np.isfinite(squared)
-    sums = np.vstack([np.zeros((1, missing.shape[1])), np.cumsum(np.where(known, squared, 0),
+    sums = np.vstack([np.zeros((1, squared.shape[1])), np.cumsum(np.where(known, squared, 0),
                                                                  axis=0)])
-    counts = np.vstack([np.zeros((1, missing.shape[1])), np.cumsum(known, axis=0)])
+    counts = np.vstack([np.zeros((1, squared.shape[1])), np.cumsum(known, axis=0)])
 
     def harder(p, a, b, share):
         frames = counts[b + 1, p] - counts[a, p]
@@ -543,21 +545,21 @@ def _squared_spreads(probe, spread, copies_spread):
     return spread ** 2 + baselines.SPREAD_FLOOR ** 2, on_copies
 
 
-def _by_steadiness(weight, e_kb, e_rigid, probe, spread, copies_spread):
+def _by_steadiness(weight, e_kb, e_rigid, squared, on_copies):
     """Per frame (frames, points), the knowledge base's share of a marker set's points that
     ``weight`` (per point) blends with the rigid estimate: the copies' inverse-error weights
     with the rigid estimate's error on the copies (``e_rigid``; ``e_kb`` the knowledge base's)
-    scaled at each frame by its donors' squared spread there against their mean over the
-    copies (:func:`_squared_spreads`): a marker's copies vouch for its rigid partners only as
-    far as they stay as steady as at the copies (chosen on the CMU C3D tuning takes,
-    docs/METHOD_NOTES.md, session 45; a skeleton's joints did worse with it, session 34). Points
-    the partners carry alone, points the knowledge base alone fills and frames without a
-    spread keep ``weight``."""
-    squared, on_copies = _squared_spreads(probe, spread, copies_spread)
+    scaled at each frame by its donors' squared spread there (``squared``) against their mean
+    over the copies (``on_copies``; both from :func:`_squared_spreads`): a marker's copies
+    vouch for its rigid partners only as far as they stay as steady as at the copies (chosen on
+    the CMU C3D tuning takes, docs/METHOD_NOTES.md, session 45; a skeleton's joints did worse
+    with it, session 34). Points the partners carry alone, points the knowledge base alone fills
+    and frames without a spread keep ``weight`` (a share strictly between 0 and 1 came from two
+    finite errors)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         scaled = e_rigid[None] * squared / on_copies[None]
         share = scaled / (e_kb[None] + scaled)
-    judged = (0 < weight) & (weight < 1) & np.isfinite(e_kb) & np.isfinite(e_rigid)
+    judged = (0 < weight) & (weight < 1)
     return np.where(judged[None] & np.isfinite(share), share, weight[None])
 
 
