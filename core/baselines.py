@@ -227,43 +227,56 @@ def rigid_estimates(pos, donors=RIGID_DONORS, weighted=False, partners=None, cac
     for p, a, b in gap_runs(~seen):
         if only is None or only[a, p]:
             runs.setdefault(p, []).append((a, b))
-    partner_seen = np.isfinite(partners[..., 0])
-
-    def spread_of(q, of="spread"):  # every point's spread (or distance) against q, once per take
-        if ("spread", q) not in stats:
-            spread, _, distance = _pair_stats(partners, q, partner_seen)
-            stats[("spread", q)], stats[("distance", q)] = spread, distance
-        return stats[(of, q)]
-
     for p, gaps in runs.items():
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
-        if p not in stats:  # the partners' spread, the partners steadiest first, and the pairs'
-            spread = spread_of(p)
-            order = np.flatnonzero(np.isfinite(spread))
-            order = order[np.argsort(np.maximum(spread[order], RIGID_TIE), kind="stable")]
-            # a second copy of a donor adds nothing to its fit but a turn about the others
-            if "same" not in stats:
-                stats["same"], stats["between"], stats["skeleton"] = _pair_table(partners)
-            kept = np.array([j for i, j in enumerate(order)
-                             if not stats["same"][j, order[:i]].any()], dtype=int)
-            mutual = _mutual(spread, kept, spread_of)
-            first = _alike_first(spread[kept], spread_of(p, "distance")[kept], mutual)
-            kept, mutual = kept[first], mutual[np.ix_(first, first)]
-            # a marker set's loose donors may be taken steady against each other too
-            apart = None if stats["skeleton"] else (
-                np.where(np.isfinite(mutual), mutual, 0.0), spread_of(p, "distance")[kept],
-                stats["between"][np.ix_(kept, kept)])
-            stats[p] = spread, kept, mutual, apart
-        estimate, rms = _carry(pos, seen, p, gaps, stats[p], donors, weighted)
+        steady = steady_partners(partners, p, stats)
+        estimate, rms = _carry(pos, seen, p, gaps, steady, donors, weighted)
         if reach:
-            estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, stats[p], donors,
+            estimate, rms = _weigh([(estimate, rms), _carry(pos, seen, p, gaps, steady, donors,
                                                             weighted, reach)])
         rows = np.isfinite(rms)
         frames = np.concatenate([np.arange(a, b + 1) for a, b in gaps])[rows]
         out[frames, p] = estimate[rows]
         spreads[frames, p] = rms[rows]
     return (fill_linear(out) if only is None else out), spreads
+
+
+def steady_partners(partners, p, cache):
+    """Point ``p``'s partners on ``partners`` (positions, frames x points x 3) as the rigid
+    fill tries them for donors: every point's spread against ``p`` (SD of their distance while
+    both are seen; inf where too rarely), the points in the order they are tried (steadiest
+    first; of copies (:func:`same_points`) only the steadiest; those alike as
+    :func:`_alike_first` orders them), their spreads against each other (:func:`_mutual`) and,
+    on a marker set, :func:`_donors`' ``apart``. Kept in ``cache``, a dict shared by calls on
+    the same ``partners``, with every pair's statistics, so each is computed once."""
+    if p in cache:
+        return cache[p]
+    partners = np.asarray(partners, dtype=np.float64)
+
+    def spread_of(q, of="spread"):  # every point's spread (or distance) against q, once per take
+        if ("spread", q) not in cache:
+            spread, _, distance = _pair_stats(partners, q, np.isfinite(partners[..., 0]))
+            cache[("spread", q)], cache[("distance", q)] = spread, distance
+        return cache[(of, q)]
+
+    spread = spread_of(p)
+    order = np.flatnonzero(np.isfinite(spread))
+    order = order[np.argsort(np.maximum(spread[order], RIGID_TIE), kind="stable")]
+    # a second copy of a donor adds nothing to its fit but a turn about the others
+    if "same" not in cache:
+        cache["same"], cache["between"], cache["skeleton"] = _pair_table(partners)
+    kept = np.array([j for i, j in enumerate(order)
+                     if not cache["same"][j, order[:i]].any()], dtype=int)
+    mutual = _mutual(spread, kept, spread_of)
+    first = _alike_first(spread[kept], spread_of(p, "distance")[kept], mutual)
+    kept, mutual = kept[first], mutual[np.ix_(first, first)]
+    # a marker set's loose donors may be taken steady against each other too
+    apart = None if cache["skeleton"] else (
+        np.where(np.isfinite(mutual), mutual, 0.0), spread_of(p, "distance")[kept],
+        cache["between"][np.ix_(kept, kept)])
+    cache[p] = spread, kept, mutual, apart
+    return cache[p]
 
 
 def same_points(pos, tolerance=0.001):

@@ -299,10 +299,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     from concurrent.futures import ThreadPoolExecutor
     from dataclasses import replace
 
-    from .baselines import rigid_estimates
+    from .baselines import rigid_estimates, steady_partners
     from .matching import fill_match
     from .recover import KnnSettings, fill_knn
-    from .regression import regress_points
+    from .regression import regress_in_frame, regress_points
 
     report = report or (lambda message: None)
     progress = progress or (lambda fraction, message: None)
@@ -334,6 +334,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                         reach=reach, should_cancel=stopped, only=only)
         return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
 
+    def placed(target, only=None):  # a marker's place among its rigid partners, regressed
+        return regress_in_frame(target.positions,
+                                lambda p: steady_partners(motion.positions, p, partners), only)
+
     rigid, spread = carried(motion)
     # the knowledge base's fill where there is none
     nowhere = np.full(motion.positions.shape, np.nan) if kb is None else None
@@ -347,7 +351,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     # (numpy lets go of the interpreter in its products; the results are the same as one after
     # the other)
     with ThreadPoolExecutor(max_workers=1) as pool:
+        markers = motion.parents is None and probe.any()
         estimates = pool.submit(lambda: (carried(hidden) if probe.any() else (None, None),
+                                         (placed(hidden, probe), placed(motion)) if markers
+                                         else (None, None),
                                          fill_match(hidden, kb, long, stopped).positions
                                          if long.any() else None,
                                          regress_points(hidden.positions, motion.names,
@@ -370,7 +377,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         except BaseException:
             stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
-        (on_copies, copies_spread), matched, regressed, patterned = estimates.result()
+        ((on_copies, copies_spread), (placed_copies, placed_gaps), matched, regressed,
+         patterned) = estimates.result()
     weight = np.ones(motion.n_points)  # the knowledge base's share, per point
     # within the knowledge base's estimate, the windows' share, the take's regression's and the
     # partner's pattern's
@@ -386,6 +394,14 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
 
         e_knn, e_rigid = on_copies_of(knn_copies), on_copies_of(on_copies)
         e_rigid = np.maximum(e_rigid, _spread_floor(missing, probe, spread))
+        if markers:  # the place among the partners joins the rigid estimate by its error
+            among = _joined(e_rigid, _on_copies_where(probe, on_copies_of, placed_copies,
+                                                      on_copies))[0]
+            on_copies = _mix_in(on_copies, placed_copies, among)
+            rigid = _mix_in(rigid, placed_gaps, among)
+            if (among > 0).any():
+                report(f"auto: the place among its rigid partners, regressed on further "
+                       f"partners, joins the rigid estimate on {int((among > 0).sum())} markers")
         seen = probe.any(axis=0)
         e_kb = e_knn  # of the knowledge base's estimate: the models, with the windows on long gaps
         if long.any():
@@ -502,6 +518,14 @@ def _lacking_line(motion, out, lacking, no_kb):
     if no_kb:
         return "auto: no knowledge base: " + (said or "no gaps")
     return "auto: points the knowledge base lacks: " + (said or f"{', '.join(lacking)} (no gaps)")
+
+
+def _on_copies_where(probe, on_copies_of, estimate, otherwise):
+    """Per point, an estimate's squared error on its copies, ``otherwise``'s at the copied
+    samples it leaves unfilled, as the gaps will be; inf where it fills none of them."""
+    filled = np.isfinite(estimate[..., 0])
+    error = on_copies_of(np.where(filled[..., None], estimate, otherwise))
+    return np.where((probe & filled).any(axis=0), error, np.inf)
 
 
 def _harder_for_partners(squared, on_copies):

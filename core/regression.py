@@ -34,6 +34,16 @@ LEAST = 20
 #: takes, docs/METHOD_NOTES.md, session 32)
 KERNEL = 0.3
 KERNEL_FRAMES = 800
+#: :func:`regress_in_frame`: the partners that make a marker's frame, the further partners
+#: whose coordinates in it are the features (at most; at least ``FRAME_LEAST_FEATURES``), the
+#: penalty per fitted frame; the frame's donors may be this many times less steady (RMS
+#: spread) than the marker's steadiest partners (tuned on non-test takes,
+#: docs/METHOD_NOTES.md, session 46)
+FRAME_DONORS = 3
+FRAME_FEATURES = 6
+FRAME_LEAST_FEATURES = 3
+FRAME_RIDGE = 0.1
+FRAME_STEADY = 10.0
 
 
 def regress_points(positions, names, only=None):
@@ -101,3 +111,78 @@ def kernel_ridge(x, train, y, weight, ridge):
     band = np.median(inner[inner > 0]) if (inner > 0).any() else 1.0
     gram = near[train] + ridged + scale * np.exp(-inner / band)
     return (near + scale * np.exp(-squared / band)) @ np.linalg.solve(gram, y)
+
+
+def regress_in_frame(positions, steady, only=None):
+    """Positions (frames, points, 3) with each interior gap (NaN run) of the points in ``only``
+    ((frames, points) bool: gaps starting there; default every gap) filled by the point's place
+    among its rigid partners, regressed: its coordinates in the frame (:func:`_frame`) of its
+    :data:`FRAME_DONORS` first partners seen throughout the gap, ridge-regressed on the next
+    ones' coordinates in that frame (:data:`FRAME_FEATURES`, fitted where all of them and the
+    point are seen), the miss at the gap's ends blended across it. ``steady(p)``: every
+    point's spread against ``p`` and the partners in the order to take them
+    (:func:`~.baselines.steady_partners`). Skin slides and a marker near a joint does not keep
+    its place among its donors, as the rigid fill takes it to; the further partners say where
+    it goes. Predictions are kept within the point's fitted range, widened by :data:`MARGIN`
+    (a take that stands still where it is seen says little of where a foot goes when it
+    steps). Gaps stay NaN whose donors are far less steady than the point's steadiest
+    (:data:`FRAME_STEADY`), or with too few partners or fitted frames. Other samples NaN."""
+    pos = np.asarray(positions, dtype=np.float64)
+    seen = np.isfinite(pos[..., 0])
+    n_frames = len(pos)
+    out = np.full_like(pos, np.nan)
+    for p, a, b in gap_runs(~seen):
+        if (only is not None and not only[a, p]) or a == 0 or b == n_frames - 1:
+            continue
+        spread, order = steady(p)[:2]
+        through = order[seen[a - 1:b + 2, order].all(axis=0)][:FRAME_DONORS + FRAME_FEATURES]
+        if len(through) < FRAME_DONORS + FRAME_LEAST_FEATURES or (
+                _rms(spread[through[:FRAME_DONORS]])
+                > FRAME_STEADY * _rms(spread[order[:FRAME_DONORS]])):
+            continue
+        ok = seen[:, p] & seen[:, through].all(axis=1)
+        ok[a:b + 1] = False
+        train = np.flatnonzero(ok)
+        if len(train) < LEAST:
+            continue
+        rows = np.concatenate([train, np.arange(a - 1, b + 2)])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            origin, axes = _frame(pos[rows][:, through[:FRAME_DONORS]])
+        if not np.isfinite(axes).all():  # donors in a line
+            continue
+        own = np.einsum("tji,tj->ti", axes, pos[rows, p] - origin)
+        x = np.einsum("tji,tkj->tki", axes, pos[rows][:, through[FRAME_DONORS:]]
+                      - origin[:, None]).reshape(len(rows), -1)
+        fitted = slice(0, len(train))
+        mean, scale = x[fitted].mean(axis=0), np.maximum(x[fitted].std(axis=0), SCALE_FLOOR)
+        xs = (x - mean) / scale
+        y = own[fitted]
+        centre = y.mean(axis=0)
+        fit = xs[len(train):] @ np.linalg.solve(
+            xs[fitted].T @ xs[fitted] + FRAME_RIDGE * len(train) * np.eye(xs.shape[1]),
+            xs[fitted].T @ (y - centre)) + centre
+        low, high = y.min(axis=0), y.max(axis=0)
+        fit = np.clip(fit, low - MARGIN * (high - low), high + MARGIN * (high - low))
+        miss = own[len(train):] - fit  # known at the gap's ends only
+        ramp = np.linspace(0.0, 1.0, len(fit))[:, None]
+        fit += (1 - ramp) * miss[0] + ramp * miss[-1]
+        world = origin[len(train):] + np.einsum("tij,tj->ti", axes[len(train):], fit)
+        out[a:b + 1, p] = world[1:-1]
+    return out
+
+
+def _frame(points):
+    """Origin (frames, 3) and axes (frames, 3, 3; in columns) of three points (frames, 3, 3):
+    their mean; the first to the second; the first to the third made square to that; their
+    cross product."""
+    x = points[:, 1] - points[:, 0]
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = points[:, 2] - points[:, 0]
+    y -= np.sum(y * x, axis=1, keepdims=True) * x
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    return points.mean(axis=1), np.stack([x, y, np.cross(x, y)], axis=2)
+
+
+def _rms(values):
+    return float(np.sqrt(np.mean(np.square(values))))
+
