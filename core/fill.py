@@ -108,7 +108,9 @@ class GapAccount:
 
     ``point``: its name; ``first``, ``last``: its frames (rows, inclusive). The shares of the
     estimates in its fill, as ``auto`` weighed them on the point's copies (they sum to 1):
-    ``rigid`` (the rigid partners), ``models`` (the knowledge base's local models), ``windows``
+    ``rigid`` (the rigid partners; on a marker set with the marker's place among them
+    regressed, :func:`~.regression.regress_in_frame`), ``models`` (the knowledge base's local
+    models), ``windows``
     (the knowledge base's windows of motion), ``own`` (the take's own regression on the rest of
     the body), ``spline`` (a spline through the take, short gaps), ``pattern`` (a partner's
     pattern: short gaps, and a point's long gaps within the knowledge base's side); on a marker
@@ -281,7 +283,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     weighted by how steady their distance to the point is over the take
     (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate also reaches past the
     gap's ends (:data:`AUTO_REACH`), and its error on the copies is scaled at each frame by how
-    far its donors stray there against at the copies (:func:`_by_steadiness`). Copies shorter
+    far its donors stray there against at the copies (:func:`_by_steadiness`); within it, the
+    marker's place among those partners regressed on further partners
+    (:func:`~.regression.regress_in_frame`: skin slides, a marker near a joint moves among its
+    donors) joins the rigid-body fill by their errors on the copies. Copies shorter
     than the gaps do not vouch for the rigid estimate beyond its donors' spread
     (:data:`AUTO_SPREAD_CAP`). On points with long gaps
     (:data:`AUTO_MATCH_SECONDS`) the knowledge base's estimate is its models' fill and its

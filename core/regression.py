@@ -8,6 +8,10 @@ throughout the gap, fitted on the frames where all of them are seen, with a Gaus
 beside the linear one (so the point may follow the others in a curve, as the armatures'
 ``regress_kernel`` does), predicts the gap; the prediction's miss at the observations either
 side is blended across it (:func:`~.motion.blend_into_gaps`), so the fill meets both ends.
+
+On a marker set the same idea works closer in (:func:`regress_in_frame`): a marker's place
+among its steadiest partners, which the rigid fill holds constant, regressed on where further
+partners sit among them.
 """
 
 import numpy as np
