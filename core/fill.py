@@ -406,7 +406,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             rigid = _mix_in(rigid, placed_gaps, among)
             if (among > 0).any():
                 report(f"auto: the place among its rigid partners, regressed on further "
-                       f"partners, joins the rigid estimate on {int((among > 0).sum())} markers")
+                       f"partners, joins the rigid estimate on {int((among > 0).sum())} of "
+                       f"{int(probe.any(axis=0).sum())} markers with copies")
         seen = probe.any(axis=0)
         e_kb = e_knn  # of the knowledge base's estimate: the models, with the windows on long gaps
         if long.any():
