@@ -151,11 +151,11 @@ def regress_in_frame(positions, steady, only=None):
             continue
         rows = np.concatenate([train, np.arange(a - 1, b + 2)])
         with np.errstate(invalid="ignore", divide="ignore"):
-            origin, axes = _frame(pos[rows][:, through[:FRAME_DONORS]])
+            origin, axes = _frame(pos[rows[:, None], through[:FRAME_DONORS]])
         if not np.isfinite(axes).all():  # donors in a line
             continue
         own = np.einsum("tji,tj->ti", axes, pos[rows, p] - origin)
-        x = np.einsum("tji,tkj->tki", axes, pos[rows][:, through[FRAME_DONORS:]]
+        x = np.einsum("tji,tkj->tki", axes, pos[rows[:, None], through[FRAME_DONORS:]]
                       - origin[:, None]).reshape(len(rows), -1)
         fitted = slice(0, len(train))
         mean, scale = x[fitted].mean(axis=0), np.maximum(x[fitted].std(axis=0), SCALE_FLOOR)
