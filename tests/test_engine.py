@@ -815,7 +815,8 @@ def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir, monkeyp
     rigid estimate's on the same copies where that estimate fills a marker alone). Measured
     when written (mm, 3 / 12 frames): auto 0.22 / 4.00, without the spline 1.19 / 8.28, spline
     0.19 / 9.03, rigid 1.06 / 8.30, pattern 1.64 / 10.98 (scoring the rigid estimate on the
-    marker's own copies instead: auto 0.74 / 7.12)."""
+    marker's own copies instead: auto 0.74 / 7.12). Since the place among the partners joins
+    the rigid estimate (session 46): auto 0.21 / 3.48, without the spline 0.75 / 4.94."""
     from mocap_gapfill.core import fill as fill_module
 
     for length, take, kb, query, miss in _short_marker_gaps(data_dir, "85_02", "shortgaps"):
@@ -825,7 +826,7 @@ def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir, monkeyp
             patch.setattr(fill_module, "AUTO_SPLINE_COPIES", 0)
             scores["alone"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
         print(length, scores)
-        assert scores["auto"] < (0.3 if length == 3 else 0.6) * scores["alone"]
+        assert scores["auto"] < (0.3 if length == 3 else 0.8) * scores["alone"]
         assert scores["auto"] < min(scores["rigid"], scores["pattern"])
         assert scores["auto"] < (1.3 if length == 3 else 0.6) * scores["spline"]
 
