@@ -118,12 +118,13 @@ def kernel_ridge(x, train, y, weight, ridge):
 
 
 def regress_in_frame(positions, steady, only=None):
-    """Positions (frames, points, 3) with each interior gap (NaN run) of the points in ``only``
-    ((frames, points) bool: gaps starting there; default every gap) filled by the point's place
+    """Positions (frames, points, 3) with each gap (NaN run) of the points in ``only`` ((frames,
+    points) bool: gaps starting there; default every gap) filled by the point's place
     among its rigid partners, regressed: its coordinates in the frame (:func:`_frame`) of its
     :data:`FRAME_DONORS` first partners seen throughout the gap, ridge-regressed on the next
     ones' coordinates in that frame (:data:`FRAME_FEATURES`, fitted where all of them and the
-    point are seen), the miss at the gap's ends blended across it. ``steady(p)``: every
+    point are seen), the miss at the gap's ends blended across it (at a clip's end, the miss
+    at the one end carried through). ``steady(p)``: every
     point's spread against ``p`` and the partners in the order to take them
     (:func:`~.baselines.steady_partners`). Skin slides and a marker near a joint does not keep
     its place among its donors, as the rigid fill takes it to; the further partners say where
@@ -136,10 +137,11 @@ def regress_in_frame(positions, steady, only=None):
     n_frames = len(pos)
     out = np.full_like(pos, np.nan)
     for p, a, b in gap_runs(~seen):
-        if (only is not None and not only[a, p]) or a == 0 or b == n_frames - 1:
+        if (only is not None and not only[a, p]) or (a == 0 and b == n_frames - 1):
             continue
+        lo, hi = max(a - 1, 0), min(b + 1, n_frames - 1)
         spread, order = steady(p)[:2]
-        through = order[seen[a - 1:b + 2, order].all(axis=0)][:FRAME_DONORS + FRAME_FEATURES]
+        through = order[seen[lo:hi + 1, order].all(axis=0)][:FRAME_DONORS + FRAME_FEATURES]
         if len(through) < FRAME_DONORS + FRAME_LEAST_FEATURES or (
                 _rms(spread[through[:FRAME_DONORS]])
                 > FRAME_STEADY * _rms(spread[order[:FRAME_DONORS]])):
@@ -149,7 +151,7 @@ def regress_in_frame(positions, steady, only=None):
         train = np.flatnonzero(ok)
         if len(train) < LEAST:
             continue
-        rows = np.concatenate([train, np.arange(a - 1, b + 2)])
+        rows = np.concatenate([train, np.arange(lo, hi + 1)])
         with np.errstate(invalid="ignore", divide="ignore"):
             origin, axes = _frame(pos[rows[:, None], through[:FRAME_DONORS]])
         if not np.isfinite(axes).all():  # donors in a line
@@ -168,10 +170,13 @@ def regress_in_frame(positions, steady, only=None):
         low, high = y.min(axis=0), y.max(axis=0)
         fit = np.clip(fit, low - MARGIN * (high - low), high + MARGIN * (high - low))
         miss = own[len(train):] - fit  # known at the gap's ends only
-        ramp = np.linspace(0.0, 1.0, len(fit))[:, None]
-        fit += (1 - ramp) * miss[0] + ramp * miss[-1]
+        if a > 0 and b < n_frames - 1:
+            ramp = np.linspace(0.0, 1.0, len(fit))[:, None]
+            fit += (1 - ramp) * miss[0] + ramp * miss[-1]
+        else:
+            fit += miss[0] if a > 0 else miss[-1]
         world = origin[len(train):] + np.einsum("tij,tj->ti", axes[len(train):], fit)
-        out[a:b + 1, p] = world[1:-1]
+        out[a:b + 1, p] = world[a - lo:len(world) - (hi - b)]
     return out
 
 

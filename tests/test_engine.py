@@ -634,7 +634,8 @@ def test_a_markers_place_among_its_partners_regressed_beats_the_rigid_fill(data_
     coordinates in the frame of its three steadiest partners seen through the gap) on further
     partners' coordinates in that frame. Tuning take 02_05 at 60 fps, 10 % of the markers gone
     per second (the `markers` protocol). When written: on the samples it fills (3,000 of
-    3,700) 6.1 mm against the rigid fill's 20.8; gaps at the clip's ends and seen samples NaN."""
+    3,700) 6.1 mm against the rigid fill's 20.8; seen samples NaN. Gaps at the clip's ends take
+    the miss at their one end (session 46): 3,340 samples, 6.0 against 19.8."""
     from mocap_gapfill.core import baselines, regression
 
     take = complete_take(read_motion(data_dir / "cmu/c3d/02_05.c3d"), None, 60.0)
@@ -646,7 +647,7 @@ def test_a_markers_place_among_its_partners_regressed_beats_the_rigid_fill(data_
     rigid = baselines.rigid_estimates(pos, 3, weighted=True, cache=cache)[0]
     filled = np.isfinite(placed[..., 0])
     assert not (filled & ~miss).any()
-    assert miss[[0, -1]].any() and not filled[[0, -1]].any()
+    assert miss[[0, -1]].any() and (filled[[0, -1]] == miss[[0, -1]]).all()
     assert filled.sum() > 0.4 * miss.sum()
 
     def on_filled(estimate):
@@ -661,7 +662,8 @@ def test_auto_joins_a_markers_place_among_its_partners_to_the_rigid_estimate(dat
     """On a marker set the place among the rigid partners, regressed, joins the rigid
     estimate by its error on the copies (it fills only interior gaps whose partners it finds).
     Tuning take 02_05 at 60 fps, 20 % of the markers gone per second, KB of 06_01 and 135_02.
-    When written: 11.5 mm, 15.0 without it (rigid 31.8)."""
+    When written: 11.5 mm, 15.0 without it (rigid 31.8); with gaps at the clip's ends filled
+    from their one end: 11.8."""
     from mocap_gapfill.core import regression
 
     kb, take, miss, query = _tuning_markers(data_dir, 0.2)
