@@ -78,6 +78,11 @@ AUTO_JOIN_RAMP = 0.1
 #: theirs (tuned, docs/METHOD_NOTES.md: over longer gaps a spline's error has a tail that its
 #: copies do not foresee)
 AUTO_SPLINE_SECONDS = 0.2
+#: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
+#: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
+#: went astray on the tuning takes, where the partner's pattern carries them: docs/METHOD_NOTES.md,
+#: session 46)
+AUTO_PLACE_ENDS_SECONDS = 0.1
 AUTO_SPLINE_COPIES = 4
 AUTO_SPLINE_MARGIN = 10
 AUTO_SPLINE_REACH = 4
@@ -341,7 +346,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
 
     def placed(target, only=None):  # a marker's place among its rigid partners, regressed
         return regress_in_frame(target.positions,
-                                lambda p: steady_partners(motion.positions, p, partners), only)
+                                lambda p: steady_partners(motion.positions, p, partners), only,
+                                round(AUTO_PLACE_ENDS_SECONDS * motion.fps))
 
     rigid, spread = carried(motion)
     # the knowledge base's fill where there is none

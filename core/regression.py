@@ -117,14 +117,15 @@ def kernel_ridge(x, train, y, weight, ridge):
     return (near + scale * np.exp(-squared / band)) @ np.linalg.solve(gram, y)
 
 
-def regress_in_frame(positions, steady, only=None):
+def regress_in_frame(positions, steady, only=None, least_at_ends=0):
     """Positions (frames, points, 3) with each gap (NaN run) of the points in ``only`` ((frames,
     points) bool: gaps starting there; default every gap) filled by the point's place
     among its rigid partners, regressed: its coordinates in the frame (:func:`_frame`) of its
     :data:`FRAME_DONORS` first partners seen throughout the gap, ridge-regressed on the next
     ones' coordinates in that frame (:data:`FRAME_FEATURES`, fitted where all of them and the
     point are seen), the miss at the gap's ends blended across it (at a clip's end, the miss
-    at the one end carried through). ``steady(p)``: every
+    at the one end carried through; only gaps of ``least_at_ends`` frames or more).
+    ``steady(p)``: every
     point's spread against ``p`` and the partners in the order to take them
     (:func:`~.baselines.steady_partners`). Skin slides and a marker near a joint does not keep
     its place among its donors, as the rigid fill takes it to; the further partners say where
@@ -137,7 +138,9 @@ def regress_in_frame(positions, steady, only=None):
     n_frames = len(pos)
     out = np.full_like(pos, np.nan)
     for p, a, b in gap_runs(~seen):
-        if (only is not None and not only[a, p]) or (a == 0 and b == n_frames - 1):
+        at_end = a == 0 or b == n_frames - 1
+        if ((only is not None and not only[a, p]) or (a == 0 and b == n_frames - 1)
+                or (at_end and b - a + 1 < least_at_ends)):
             continue
         lo, hi = max(a - 1, 0), min(b + 1, n_frames - 1)
         spread, order = steady(p)[:2]
@@ -170,7 +173,7 @@ def regress_in_frame(positions, steady, only=None):
         low, high = y.min(axis=0), y.max(axis=0)
         fit = np.clip(fit, low - MARGIN * (high - low), high + MARGIN * (high - low))
         miss = own[len(train):] - fit  # known at the gap's ends only
-        if a > 0 and b < n_frames - 1:
+        if not at_end:
             ramp = np.linspace(0.0, 1.0, len(fit))[:, None]
             fit += (1 - ramp) * miss[0] + ramp * miss[-1]
         else:
