@@ -119,14 +119,13 @@ def kernel_ridge(x, train, y, weight, ridge):
 
 def regress_in_frame(positions, steady, only=None, least_at_ends=0):
     """Positions (frames, points, 3) with each gap (NaN run) of the points in ``only`` ((frames,
-    points) bool: gaps starting there; default every gap) filled by the point's place
-    among its rigid partners, regressed: its coordinates in the frame (:func:`_frame`) of its
+    points) bool: gaps starting there; default every gap) filled by the point's place among its
+    rigid partners, regressed: its coordinates in the frame (:func:`_frame`) of its
     :data:`FRAME_DONORS` first partners seen throughout the gap, ridge-regressed on the next
     ones' coordinates in that frame (:data:`FRAME_FEATURES`, fitted where all of them and the
-    point are seen), the miss at the gap's ends blended across it (at a clip's end, the miss
-    at the one end carried through; only gaps of ``least_at_ends`` frames or more).
-    ``steady(p)``: every
-    point's spread against ``p`` and the partners in the order to take them
+    point are seen), the miss at the gap's ends blended across it (at a clip's end, the miss at
+    the one end carried through; only gaps of ``least_at_ends`` frames or more). ``steady(p)``:
+    every point's spread against ``p`` and the partners in the order to take them
     (:func:`~.baselines.steady_partners`). Skin slides and a marker near a joint does not keep
     its place among its donors, as the rigid fill takes it to; the further partners say where
     it goes. Predictions are kept within the point's fitted range, widened by :data:`MARGIN`
