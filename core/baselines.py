@@ -254,9 +254,12 @@ def steady_partners(partners, p, cache):
         return cache[p]
     partners = np.asarray(partners, dtype=np.float64)
 
+    if "seen" not in cache:
+        cache["seen"] = np.isfinite(partners[..., 0])
+
     def spread_of(q, of="spread"):  # every point's spread (or distance) against q, once per take
         if ("spread", q) not in cache:
-            spread, _, distance = _pair_stats(partners, q, np.isfinite(partners[..., 0]))
+            spread, _, distance = _pair_stats(partners, q, cache["seen"])
             cache[("spread", q)], cache[("distance", q)] = spread, distance
         return cache[(of, q)]
 

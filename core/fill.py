@@ -467,7 +467,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     spreads = _squared_spreads(probe, spread, copies_spread)
     # the knowledge base's share per frame: on a marker set it follows the rigid donors' spread
     shares = np.broadcast_to(weight, missing.shape)
-    if probe.any() and motion.parents is None:
+    if markers:
         shares = _by_steadiness(weight, e_kb, e_rigid, *spreads)
     out = _blend(knn, rigid, shares)
     if probe.any():
@@ -600,9 +600,10 @@ def _by_steadiness(weight, e_kb, e_rigid, squared, on_copies):
 
 
 def _mix_in(knn, other, share):
-    """The models' fill with another estimate of the knowledge base's share (the windows,
-    :func:`~.matching.fill_match`; the take's own regression,
-    :func:`~.regression.regress_points`) mixed in at each point's ``share`` where it has one."""
+    """An estimate (the models' fill; the rigid estimate) with another mixed in at each point's
+    ``share`` where the other has a value (the windows, :func:`~.matching.fill_match`; the
+    take's own regression, :func:`~.regression.regress_points`; a marker's place among its
+    partners, :func:`~.regression.regress_in_frame`)."""
     part = np.where(np.isnan(other[..., :1]), 0.0, share[None, :, None])
     return knn * (1 - part) + np.nan_to_num(other) * part
 
