@@ -44,7 +44,9 @@ frames:
   halfway on to the mean of ``match`` and ``regress_kernel`` (``CONSENSUS``: three estimates
   from different evidence, averaged); the shorter gaps go from ``interp`` towards their fill
   only as far as the fills agree on the gap; in a take too short for copies, a long gap keeps
-  ``interp`` where it and ``regress`` agree far more closely than either does with ``match``;
+  ``interp`` where it and ``regress`` agree far more closely than either does with ``match``,
+  and takes the mean of ``match`` and ``regress_kernel`` where ``match`` would fill it unjudged
+  (``UNJUDGED_CONSENSUS``);
   with a knowledge base of positions only, ``knn``, ``half`` (half-way from ``interp`` to
   ``knn``) and ``recall`` (subtrees carried onto the knowledge base's guess from the known
   joints alone: a KB that holds the motion) stand in; without a knowledge base (a rig no
@@ -152,6 +154,10 @@ SHRINK = 1.0
 AUTO_SHARES = (0.25, 0.5, 0.75, 1.0)
 #: gaps of this many seconds or more are long (above)
 LONG_GAP = 0.5
+#: in a take without copies, a long gap that ``match`` fills unjudged goes this share of the way
+#: on to the mean of :data:`CONSENSUS_FILLS` (1: the mean itself; chosen on non-test takes,
+#: docs/METHOD_NOTES.md, session 47)
+UNJUDGED_CONSENSUS = 1.0
 #: in a take without copies, a long gap keeps the interpolation where it and ``regress`` lie
 #: within this share of ``match``'s distance from the nearer of them (RMS over the joints the
 #: gap moves; :meth:`_Job._outvoted`; chosen on non-test takes, docs/METHOD_NOTES.md)
@@ -576,7 +582,9 @@ class _Job:
         interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`). Last,
         each gap of :data:`LONG_STACK` seconds or more (where ``stack_long`` is made) that
         does not keep the interpolation goes :data:`CONSENSUS` of the way on from its fill to
-        the mean of :data:`CONSENSUS_FILLS`. Without a knowledge base the same from the take
+        the mean of :data:`CONSENSUS_FILLS`, and in a take without copies every other gap of
+        :data:`LONG_GAP` seconds or more that does not keep it :data:`UNJUDGED_CONSENSUS` of
+        the way (``match`` is unjudged there). Without a knowledge base the same from the take
         alone: :data:`TAKE_ALONE_CANDIDATES`, the stacks without the knowledge base's fills,
         the consensus :data:`TAKE_ALONE_CONSENSUS`; a take without copies takes ``hermite`` on
         gaps shorter than :data:`LONG_GAP` and goes :data:`TAKE_ALONE_UNJUDGED` of the way to
@@ -605,7 +613,12 @@ class _Job:
         longest = [rotations and (e - a + 1) >= LONG_STACK * self.fps
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
+        # in a take without copies, a long gap match fills unjudged goes on to the consensus
+        unjudged = [rotations and not alone and not copies and (e - a + 1) >= LONG_GAP * self.fps
+                    for _, a, e in runs]
         fills = self.long_fills if any(longest) else self.stack_fills if stack else ()
+        if any(unjudged):
+            fills += tuple(f for f in self.consensus_fills if f not in fills)
         if any(longest) and not copies:  # nothing to weigh the fills by: equal parts
             long_table = np.full((len(stacking.DISTANCES), len(stacking.LENGTHS), len(fills)),
                                  1 / len(fills))
@@ -668,20 +681,24 @@ class _Job:
         towards = self.consensus_fills
         agree = CONSENSUS if wanted.any() and set(towards) <= set(made) else 0.0
         self.choices, self.estimates = choice, estimates
-        self.consensus = [agree if last and name != "interp"
+        onward = [agree if last else UNJUDGED_CONSENSUS * bool(agree) if unjudged_gap else 0.0
+                  for last, unjudged_gap in zip(longest, unjudged)]
+        self.consensus = [on if name != "interp"
                           and (share < 1 or set(towards) != {name}) else 0.0  # there already
-                          for (name, share), last in zip(choice, longest)]
+                          for (name, share), on in zip(choice, onward)]
         counts, partly = {}, {}
         for name, share in choice:
             counts[name] = counts.get(name, 0) + 1
             partly[name] = partly.get(name, 0) + (0 < share < 1)
-        together = np.count_nonzero(self.consensus)
+        onwards = "; ".join(
+            f"{n} long gaps {'to the mean of' if on == 1 else f'{on:.0%} of the way on to'} "
+            f"{' + '.join(towards)}"
+            for on, n in zip(*np.unique([on for on in self.consensus if on], return_counts=True)))
         self.report("auto: " + ", ".join(
             f"{name} on {n} of {len(runs)} gaps"
             + (f" ({partly[name]} part of the way from the interpolation)" if partly[name] else "")
             for name, n in counts.items())
-            + (f"; then {together} long gaps {agree:.0%} of the way on to "
-               f"{' + '.join(towards)}" if together else ""))
+            + (f"; then {onwards}" if onwards else ""))
         if not wanted.any():
             return seen
         out = seen.copy()
