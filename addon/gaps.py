@@ -318,7 +318,8 @@ def how_filled(choices, bone, first, last):
     if not parts:
         return "", 0.0, 0.0
     labels = [(c.method if c.share in (0.0, 1.0) else f"{c.method} ({c.share:.0%} of the way)")
-              + (f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
+              + (f", then the mean of {c.towards}" if c.consensus == 1 else
+                 f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0
