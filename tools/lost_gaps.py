@@ -24,10 +24,9 @@ from mocap_gapfill.core.bonefill import AUTO_COPIES, COPY_MARGIN, fill_bones, ga
 from mocap_gapfill.core.evaluate import (BONE_SETTINGS, kb_without, punch_bone_gaps,
                                          subject_of)
 from mocap_gapfill.core.io import read_rig_take
-from mocap_gapfill.core.kb import build_kb
 from mocap_gapfill.core.motion import gap_runs
 from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
-from tune_bones import AMC, AMC_TEST_TAKES, AMC_TUNING, DAZ, TEST_TAKES
+from tune_bones import AMC, AMC_TUNING, DAZ, armature_kb
 
 DAZ_TUNING = "01_08 02_05 03_02 05_10 06_03 07_05 08_02 09_05 10_03 11_01 12_03 13_10".split()
 STEPS = np.linspace(0.0, 1.0, 21)
@@ -35,13 +34,9 @@ STEPS = np.linspace(0.0, 1.0, 21)
 
 def run(out):
     amc = bool(os.environ.get("AMC"))
-    if amc:
-        full = build_kb([AMC], fps=60.0, exclude=[f"*{t}.amc" for t in AMC_TEST_TAKES])
-        paths = [AMC / f"{t}.amc" for t in AMC_TUNING]
-    else:
-        full = build_kb([DAZ], fps=60.0, skip_frames=6,
-                        exclude=[f"*{t}.bvh*" for t in TEST_TAKES])
-        paths = [DAZ / t[:2] / f"{t}.bvh.gz" for t in DAZ_TUNING]
+    full = armature_kb(amc)
+    paths = ([AMC / f"{t}.amc" for t in AMC_TUNING] if amc
+             else [DAZ / t[:2] / f"{t}.bvh.gz" for t in DAZ_TUNING])
     only = os.environ.get("TAKES")
     paths = [p for p in paths if not only or any(t in p.name for t in only.split(","))]
     with open(out, "w") as sink:

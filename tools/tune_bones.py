@@ -48,6 +48,14 @@ AMC_TUNING = ["07/07_05", "09/09_06", "_unverified/charleston/charleston1",
 SHARES = (0.25, 0.5, 0.75, 1.0)
 
 
+def armature_kb(amc):
+    """The knowledge base the armature tuning tools fill from: every CMU ASF/AMC take
+    (``amc``) or every Daz-friendly take at 60 poses a second, the test takes out."""
+    if amc:
+        return build_kb([AMC], fps=60.0, exclude=[f"*{t}.amc" for t in AMC_TEST_TAKES])
+    return build_kb([DAZ], fps=60.0, skip_frames=6, exclude=[f"*{t}.bvh*" for t in TEST_TAKES])
+
+
 def main(out, names=CANDIDATES):
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -56,12 +64,8 @@ def main(out, names=CANDIDATES):
     skip = 0 if amc else 6
     if cache.is_file():
         full = load_kb(cache)
-    elif amc:
-        full = build_kb([AMC], fps=60.0, exclude=[f"*{t}.amc" for t in AMC_TEST_TAKES])
-        full.save(cache)
     else:
-        full = build_kb([DAZ], fps=60.0, skip_frames=6,
-                        exclude=[f"*{t}.bvh*" for t in TEST_TAKES])
+        full = armature_kb(amc)
         full.save(cache)
     takes = os.environ.get("MOCAP_GAPFILL_TUNE_TAKES")
     takes = [f"{t[:2]}/{t}" for t in takes.split(",")] if takes else AMC_TUNING if amc else TUNING

@@ -21,22 +21,16 @@ from mocap_gapfill.core import bonefill
 from mocap_gapfill.core.evaluate import (BONE_SETTINGS, bone_errors, kb_without,
                                          punch_bone_gaps, subject_of)
 from mocap_gapfill.core.io import read_rig_take
-from mocap_gapfill.core.kb import build_kb
 from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
-from tune_bones import AMC, AMC_TEST_TAKES, AMC_TUNING, DAZ, TEST_TAKES
+from tune_bones import AMC, AMC_TUNING, DAZ, TEST_TAKES, armature_kb
 
 
 def run(out, share):
     bonefill.UNJUDGED_CONSENSUS = share
     amc = bool(os.environ.get("AMC"))
-    if amc:
-        full = build_kb([AMC], fps=60.0, exclude=[f"*{t}.amc" for t in AMC_TEST_TAKES])
-        paths = [AMC / f"{t}.amc" for t in AMC_TUNING]
-    else:
-        full = build_kb([DAZ], fps=60.0, skip_frames=6,
-                        exclude=[f"*{t}.bvh*" for t in TEST_TAKES])
-        paths = [p for p in sorted(DAZ.glob("*/*.bvh.gz"))
-                 if p.name.split(".")[0] not in TEST_TAKES]
+    full = armature_kb(amc)
+    paths = ([AMC / f"{t}.amc" for t in AMC_TUNING] if amc else
+             [p for p in sorted(DAZ.glob("*/*.bvh.gz")) if p.name.split(".")[0] not in TEST_TAKES])
     with open(out, "w") as sink:
         for path in paths:
             rig, channels, location, fps = read_rig_take(path, skip_frames=0 if amc else 6)
