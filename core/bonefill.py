@@ -71,8 +71,8 @@ from scipy.spatial.transform import Rotation, Slerp
 from .errors import GapFillError
 from .kb import match_names
 from .motion import Motion, blend_into_gaps, gap_runs, skeleton_limbs, widened
-from .posing import best_rotation, child_handles, forward, order_bones, rotation_between, \
-    solve_pose, tail_handles
+from .posing import best_rotation, child_handles, forward, gram_schmidt, order_bones, \
+    rotation_between, solve_pose, tail_handles
 from .rig import aligned_turns, basis_matrices, basis_turns, hermite_channels, \
     hermite_rotations, interpolate_channels, regress_channels
 from . import stacking
@@ -903,10 +903,7 @@ def _orthonormal(six):
     """Rotation matrices (..., 3, 3) nearest in Gram-Schmidt's sense to the first two columns
     given as (..., 6) (row-major of a (3, 2) block)."""
     cols = six.reshape(six.shape[:-1] + (3, 2))
-    x = cols[..., 0] / np.linalg.norm(cols[..., 0], axis=-1, keepdims=True)
-    y = cols[..., 1] - (x * cols[..., 1]).sum(axis=-1, keepdims=True) * x
-    y /= np.linalg.norm(y, axis=-1, keepdims=True)
-    return np.stack([x, y, np.cross(x, y)], axis=-1)
+    return gram_schmidt(cols[..., 0], cols[..., 1])
 
 
 def halfway(start, end, gaps, share=0.5):

@@ -51,6 +51,15 @@ def rotation_between(a, b):
     return r
 
 
+def gram_schmidt(x, y):
+    """Rotation matrices (..., 3, 3) whose columns are ``x`` made unit, ``y`` made square to it
+    and unit, and their cross product (``x``, ``y``: (..., 3); NaN where they are parallel)."""
+    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    y = y - (x * y).sum(axis=-1, keepdims=True) * x
+    y /= np.linalg.norm(y, axis=-1, keepdims=True)
+    return np.stack([x, y, np.cross(x, y)], axis=-1)
+
+
 def best_rotation(a, b):
     """Rotations ``r`` minimising ``sum_i |r @ a[..., i, :] - b[..., i, :]|^2`` (Kabsch).
 

@@ -19,6 +19,7 @@ import numpy as np
 from .errors import GapFillError
 from .motion import blend_into_gaps, gap_runs, widened
 from .normalize import denormalize, find_reference, frames_of, normalize
+from .posing import gram_schmidt
 
 #: penalty per training frame on the standardised coordinates
 RIDGE = 0.01
@@ -88,13 +89,20 @@ def regress_points(positions, names, only=None):
         # one system for the training frames and the gap's: the former make the Gram matrix
         fit = kernel_ridge(xs[np.concatenate([train, span])], np.arange(len(train)),
                            y - centre, KERNEL, RIDGE)[len(train):] + centre
-        low, high = y.min(axis=0), y.max(axis=0)
-        pad = MARGIN * (high - low)
-        pred[span, p] = np.clip(fit, low - pad, high + pad)
+        pred[span, p] = within_fitted(fit, y)
         wanted[a:b + 1, p] = True
     world = denormalize(pred, root, angle)
     return blend_into_gaps(np.where(wanted[..., None], np.nan, pos), world, wanted,
                            widened(wanted))
+
+
+def within_fitted(pred, y, margin=MARGIN):
+    """``pred`` kept within the range of the fitted values ``y`` (per column), widened by
+    ``margin`` of it on each side. Shared with the armatures' regression
+    (:func:`~.rig.regress_channels`)."""
+    low, high = y.min(axis=0), y.max(axis=0)
+    pad = margin * (high - low)
+    return np.clip(pred, low - pad, high + pad)
 
 
 def kernel_ridge(x, train, y, weight, ridge):
@@ -169,8 +177,7 @@ def regress_in_frame(positions, steady, only=None, least_at_ends=0):
         fit = xs[len(train):] @ np.linalg.solve(
             xs[fitted].T @ xs[fitted] + FRAME_RIDGE * len(train) * np.eye(xs.shape[1]),
             xs[fitted].T @ (y - centre)) + centre
-        low, high = y.min(axis=0), y.max(axis=0)
-        fit = np.clip(fit, low - MARGIN * (high - low), high + MARGIN * (high - low))
+        fit = within_fitted(fit, y)
         miss = own[len(train):] - fit  # known at the gap's ends only
         if not at_end:
             ramp = np.linspace(0.0, 1.0, len(fit))[:, None]
@@ -186,12 +193,8 @@ def _frame(points):
     """Origin (frames, 3) and axes (frames, 3, 3; in columns) of three points (frames, 3, 3):
     their mean; the first to the second; the first to the third made square to that; their
     cross product."""
-    x = points[:, 1] - points[:, 0]
-    x /= np.linalg.norm(x, axis=1, keepdims=True)
-    y = points[:, 2] - points[:, 0]
-    y -= np.sum(y * x, axis=1, keepdims=True) * x
-    y /= np.linalg.norm(y, axis=1, keepdims=True)
-    return points.mean(axis=1), np.stack([x, y, np.cross(x, y)], axis=2)
+    return points.mean(axis=1), gram_schmidt(points[:, 1] - points[:, 0],
+                                             points[:, 2] - points[:, 0])
 
 
 def _rms(values):

@@ -27,7 +27,7 @@ from scipy.spatial.transform import Rotation
 
 from .errors import GapFillError
 from .posing import forward
-from .regression import kernel_ridge
+from .regression import kernel_ridge, within_fitted
 
 EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 ROTATION_MODES = EULER_ORDERS + ("QUATERNION", "AXIS_ANGLE")
@@ -424,9 +424,7 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=
                                 ridge) + centre
             ends = np.array([t for t in (a - 1, e + 1) if 0 <= t < frames])
             if len(ends) == 1:  # no second key to pull it back: within what training saw
-                low, high = y[train].min(axis=0), y[train].max(axis=0)
-                pad = ONE_SIDED_MARGIN * (high - low)
-                pred = np.clip(pred, low - pad, high + pad)
+                pred = within_fitted(pred, y[train], ONE_SIDED_MARGIN)
             miss = y - pred  # known at the keys beside the gap
             span = np.arange(a, e + 1)
             for k in range(width):
