@@ -289,13 +289,20 @@ def same_points(pos, tolerance=0.001):
     return _pair_table(pos, tolerance)[0]
 
 
-def _pair_table(pos, tolerance=0.001):
-    """On at most 500 frames: :func:`same_points`, every pair's mean distance while both are
-    seen (NaN where never), and whether the take is a skeleton: every point seen keeps its
-    distance to another (not its copy) within :data:`RIGID_TIE` over 10 frames or more, as a
-    skeleton's joints do, each a bone's length from the next; no marker on soft tissue does
-    (HDM05's head, thorax and pelvis markers are rigid to 0.04 mm among themselves, its limb
-    markers are not)."""
+def exact_pairs(pos):
+    """The pairs of points (pairs x 2, ``i < j``) whose distance stays within :data:`RIGID_TIE`
+    (SD) over 10 or more frames where both are seen, and that distance (metres; on the mean):
+    a skeleton's bones and the joints on one segment, points of a rigid cluster the capture
+    software solved; judged on at most 500 frames."""
+    mean, exact = _pair_spreads(pos)[:2]
+    first, second = np.nonzero(np.triu(exact, 1))
+    return np.stack([first, second], axis=1), mean[first, second]
+
+
+def _pair_spreads(pos):
+    """On at most 500 frames: every pair's mean distance while both are seen (NaN where never),
+    whether it stays within :data:`RIGID_TIE` (SD) over 10 or more such frames (never a point
+    with itself), and which points are seen there."""
     sample = np.asarray(pos, dtype=np.float64)[::max(1, len(pos) // 500)]
     seen = np.isfinite(sample[..., 0])
     points = sample.shape[1]
@@ -307,9 +314,20 @@ def _pair_table(pos, tolerance=0.001):
             mean[i] = np.nanmean(distance, axis=0)
             exact[i] = (((seen & seen[:, i:i + 1]).sum(axis=0) >= 10)
                         & (np.nanstd(distance, axis=0) <= RIGID_TIE))
+    np.fill_diagonal(exact, False)
+    return mean, exact, seen
+
+
+def _pair_table(pos, tolerance=0.001):
+    """On at most 500 frames: :func:`same_points`, every pair's mean distance while both are
+    seen (NaN where never), and whether the take is a skeleton: every point seen keeps its
+    distance to another (not its copy) within :data:`RIGID_TIE` over 10 frames or more, as a
+    skeleton's joints do, each a bone's length from the next; no marker on soft tissue does
+    (HDM05's head, thorax and pelvis markers are rigid to 0.04 mm among themselves, its limb
+    markers are not)."""
+    mean, exact, seen = _pair_spreads(pos)
     same = mean < tolerance
     np.fill_diagonal(same, False)
-    np.fill_diagonal(exact, False)
     skeleton = bool((exact & ~same).any(axis=1)[seen.sum(axis=0) >= 10].all())
     return same, mean, skeleton
 

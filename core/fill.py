@@ -498,10 +498,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         report(_lacking_line(motion, out, lacking, kb is None))
     accounts = []
     harder = _harder_for_partners(*spreads)
+    uncertainty = np.zeros(missing.shape)  # each gap's squared error expected
     for p, a, b in gap_runs(missing):
         kb_side = float(shares[a:b + 1, p].mean())
         spline_share, pattern_share, squared = eased.get(
             (p, a), (0.0, 0.0, per_sample[p] * harder(p, a, b, kb_side)))
+        uncertainty[a:b + 1, p] = squared
         rest = 1 - spline_share - pattern_share
         kb_share = kb_side * rest
         models = kb_share * (1 - by_partner[p])  # the models, the windows and the regression
@@ -511,7 +513,36 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             windows=float(models * windows[p] * (1 - own[p])), own=float(models * own[p]),
             spline=float(spline_share), pattern=float(pattern_share + kb_share * by_partner[p]),
             estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
-    return _with_fill(motion, out), accounts
+    return _with_fill(motion, _with_distances_kept(motion, out, uncertainty, report)), accounts
+
+
+def _with_distances_kept(motion, out, uncertainty, report):
+    """The fill ``out`` with the take's missing samples moved onto the distances it keeps
+    exactly (:func:`~.baselines.exact_pairs`, :func:`~.distances.keep_distances`), each by its
+    expected squared error ``uncertainty`` (where unknown: the largest known, else 1 m^2; at
+    least :data:`~.baselines.RIGID_TIE` squared). The
+    gaps' estimates stay those of the fill before: on the tuning takes' copies, where more
+    points are hidden at once, keeping the distances gained less than on the gaps
+    (docs/METHOD_NOTES.md, session 48)."""
+    from .distances import keep_distances
+
+    missing = motion.missing
+    pairs, lengths = baselines.exact_pairs(motion.positions)
+    if not (missing[:, pairs[:, 0]] | missing[:, pairs[:, 1]]).any():
+        return out
+    known = np.isfinite(uncertainty) & missing
+    fallback = uncertainty[known].max() if known.any() else 1.0
+    # no filled sample is sure to better than the rounding of a rigid tie
+    uncertainty = np.where(missing, np.maximum(np.where(known, uncertainty, fallback),
+                                               baselines.RIGID_TIE ** 2), 0.0)
+    kept = keep_distances(out, missing, uncertainty, pairs, lengths)
+    moved = np.linalg.norm(kept - out, axis=2)[missing]
+    moved = moved[np.isfinite(moved)]
+    if moved.size:
+        report(f"auto: filled samples moved onto the {len(pairs)} distances the take keeps "
+               f"exactly (a bone's length, joints on one segment): median "
+               f"{1000 * np.median(moved):.1f} mm, at most {1000 * moved.max():.1f} mm")
+    return kept
 
 
 def _lacking_line(motion, out, lacking, no_kb):

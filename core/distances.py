@@ -1,0 +1,63 @@
+"""Distances a take keeps exactly, kept by its fill.
+
+A skeleton's joints keep their bones' lengths to the rounding of the file, and the joints on one
+segment their distances to each other; so may a rigid cluster of markers that the capture
+software solved (:func:`~.baselines.exact_pairs` finds them on the frames where both ends are
+seen). A blend of two estimates, a spline, a rigid fill from donors on another segment do not,
+and the knowledge base's energy only pulls towards a bone's length. :func:`keep_distances` moves
+the filled samples back onto those distances, each pair's correction shared by its two ends by
+how uncertain each is (a seen sample does not move), sweeping over the pairs one after the other
+(Gauss-Seidel, as position-based dynamics does). A joint between two seen ones keeps only its
+turn about their line to be wrong; one on a seen segment, nothing (docs/METHOD_NOTES.md, session
+48).
+"""
+
+import numpy as np
+
+#: sweeps over the pairs (docs/METHOD_NOTES.md, session 48)
+SWEEPS = 20
+
+
+def keep_distances(positions, missing, uncertainty, pairs, lengths, sweeps=SWEEPS):
+    """``positions`` with its ``missing`` samples moved so that the points of each pair of
+    ``pairs`` lie ``lengths`` apart.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (frames, points, 3)
+        A fill: NaN where it has none (those samples and their pairs are left alone).
+    missing : ndarray, shape (frames, points), bool
+        The filled samples: the only ones that move.
+    uncertainty : ndarray, shape (frames, points)
+        The expected squared error of each filled sample: of a pair's correction, each end takes
+        its share of the two ends' sum (0: it keeps its place).
+    pairs : ndarray, shape (pairs, 2), int
+    lengths : ndarray, shape (pairs,)
+
+    Returns
+    -------
+    ndarray, shape (frames, points, 3), float64: a new array.
+
+    >>> pos = np.array([[[0.0, 0, 0], [2.0, 0, 0]]])
+    >>> keep_distances(pos, np.array([[False, True]]), np.ones((1, 2)), np.array([[0, 1]]),
+    ...                np.array([1.0]))[0, 1].tolist()
+    [1.0, 0.0, 0.0]
+    """
+    out = np.array(positions, dtype=np.float64)
+    filled = np.isfinite(out[..., 0])
+    share = np.where(missing & filled, uncertainty, 0.0)
+    share[~filled] = np.nan
+    steps = []
+    for (a, b), length in zip(pairs, lengths):
+        total = share[:, a] + share[:, b]
+        frames = np.flatnonzero(total > 0)  # NaN (a sample without a fill) compares False
+        if frames.size:
+            steps.append((a, b, length, frames, (share[frames, a] / total[frames])[:, None]))
+    for _ in range(sweeps):
+        for a, b, length, frames, part in steps:
+            apart = out[frames, a] - out[frames, b]
+            distance = np.linalg.norm(apart, axis=1)
+            step = ((distance - length) / np.maximum(distance, 1e-9))[:, None] * apart
+            out[frames, a] -= part * step
+            out[frames, b] += (1 - part) * step
+    return out
