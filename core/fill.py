@@ -520,10 +520,9 @@ def _with_distances_kept(motion, out, uncertainty, report):
     """The fill ``out`` with the take's missing samples moved onto the distances it keeps
     exactly (:func:`~.baselines.exact_pairs`, :func:`~.distances.keep_distances`), each by its
     expected squared error ``uncertainty`` (where unknown: the largest known, else 1 m^2; at
-    least :data:`~.baselines.RIGID_TIE` squared). The
-    gaps' estimates stay those of the fill before: on the tuning takes' copies, where more
-    points are hidden at once, keeping the distances gained less than on the gaps
-    (docs/METHOD_NOTES.md, session 48)."""
+    least :data:`~.baselines.RIGID_TIE` squared). The gaps' estimates stay those of the fill
+    before: moved alike, the copies (more points hidden at once) judged the move worse than it
+    is on the gaps (docs/METHOD_NOTES.md, session 48)."""
     from .distances import keep_distances
 
     missing = motion.missing
@@ -532,7 +531,7 @@ def _with_distances_kept(motion, out, uncertainty, report):
         return out
     known = np.isfinite(uncertainty) & missing
     fallback = uncertainty[known].max() if known.any() else 1.0
-    # no filled sample is sure to better than the rounding of a rigid tie
+    # no filled sample is surer of its place than the rounding of a rigid tie
     uncertainty = np.where(missing, np.maximum(np.where(known, uncertainty, fallback),
                                                baselines.RIGID_TIE ** 2), 0.0)
     kept = keep_distances(out, missing, uncertainty, pairs, lengths)
