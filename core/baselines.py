@@ -289,33 +289,34 @@ def same_points(pos, tolerance=0.001):
     return _pair_table(pos, tolerance)[0]
 
 
-def exact_pairs(pos):
-    """The pairs of points (pairs x 2, ``i < j``) whose distance stays within :data:`RIGID_TIE`
-    (SD) over 10 or more frames where both are seen, and that distance (metres; on the mean):
-    a skeleton's bones and the joints on one segment, points of a rigid cluster the capture
-    software solved; judged on at most 500 frames."""
-    mean, exact = _pair_spreads(pos)[:2]
-    first, second = np.nonzero(np.triu(exact, 1))
-    return np.stack([first, second], axis=1), mean[first, second]
+def steady_pairs(pos, most=RIGID_TIE):
+    """The pairs of points (pairs x 2, ``i < j``) whose distance keeps within ``most`` (metres,
+    SD) over 10 or more frames where both are seen, that distance (on the mean) and its SD:
+    at :data:`RIGID_TIE`, a skeleton's bones and the joints on one segment, points of a rigid
+    cluster the capture software solved; at a few millimetres, markers on one segment as well
+    (skin slides); judged on at most 500 frames."""
+    mean, spread = _pair_spreads(pos)[:2]
+    first, second = np.nonzero(np.triu(spread <= most, 1))
+    return np.stack([first, second], axis=1), mean[first, second], spread[first, second]
 
 
 def _pair_spreads(pos):
     """On at most 500 frames: every pair's mean distance while both are seen (NaN where never),
-    whether it stays within :data:`RIGID_TIE` (SD) over 10 or more such frames (never a point
-    with itself), and which points are seen there."""
+    its SD (inf where fewer than 10 such frames, and for a point with itself), and which points
+    are seen there."""
     sample = np.asarray(pos, dtype=np.float64)[::max(1, len(pos) // 500)]
     seen = np.isfinite(sample[..., 0])
     points = sample.shape[1]
-    mean, exact = np.full((points, points), np.nan), np.zeros((points, points), bool)
+    mean, spread = np.full((points, points), np.nan), np.full((points, points), np.inf)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # pairs never seen together
         for i in range(points):
             distance = np.linalg.norm(sample - sample[:, i:i + 1], axis=2)
             mean[i] = np.nanmean(distance, axis=0)
-            exact[i] = (((seen & seen[:, i:i + 1]).sum(axis=0) >= 10)
-                        & (np.nanstd(distance, axis=0) <= RIGID_TIE))
-    np.fill_diagonal(exact, False)
-    return mean, exact, seen
+            spread[i] = np.where((seen & seen[:, i:i + 1]).sum(axis=0) >= 10,
+                                 np.nanstd(distance, axis=0), np.inf)
+    np.fill_diagonal(spread, np.inf)
+    return mean, spread, seen
 
 
 def _pair_table(pos, tolerance=0.001):
@@ -325,7 +326,8 @@ def _pair_table(pos, tolerance=0.001):
     skeleton's joints do, each a bone's length from the next; no marker on soft tissue does
     (HDM05's head, thorax and pelvis markers are rigid to 0.04 mm among themselves, its limb
     markers are not)."""
-    mean, exact, seen = _pair_spreads(pos)
+    mean, spread, seen = _pair_spreads(pos)
+    exact = spread <= RIGID_TIE
     same = mean < tolerance
     np.fill_diagonal(same, False)
     skeleton = bool((exact & ~same).any(axis=1)[seen.sum(axis=0) >= 10].all())

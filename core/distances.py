@@ -2,14 +2,16 @@
 
 A skeleton's joints keep their bones' lengths to the rounding of the file, and the joints on one
 segment their distances to each other; so may a rigid cluster of markers that the capture
-software solved (:func:`~.baselines.exact_pairs` finds them on the frames where both ends are
+software solved (:func:`~.baselines.steady_pairs` finds them on the frames where both ends are
 seen). A blend of two estimates, a spline, a rigid fill from donors on another segment do not,
 and the knowledge base's energy only pulls towards a bone's length. :func:`keep_distances` moves
 the filled samples back onto those distances, each pair's correction shared by its two ends by
 how uncertain each is (a seen sample does not move), sweeping over the pairs one after the other
 (Gauss-Seidel, as position-based dynamics does). A joint between two seen ones keeps only its
-turn about their line to be wrong; one on a seen segment, nothing (docs/METHOD_NOTES.md, session
-48).
+turn about their line to be wrong; one on a seen segment, nothing. Markers on one segment keep
+their distances only within a few millimetres (skin slides): a pair is then a measurement of its
+distance with that spread, weighed against the ends' uncertainties (docs/METHOD_NOTES.md,
+session 48).
 """
 
 import numpy as np
@@ -18,9 +20,10 @@ import numpy as np
 SWEEPS = 20
 
 
-def keep_distances(positions, missing, uncertainty, pairs, lengths, sweeps=SWEEPS):
+def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None,
+                   sweeps=SWEEPS):
     """``positions`` with its ``missing`` samples moved so that the points of each pair of
-    ``pairs`` lie ``lengths`` apart.
+    ``pairs`` lie ``lengths`` apart, as far as each pair's ``spreads`` lets it.
 
     Parameters
     ----------
@@ -33,6 +36,10 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, sweeps=SWEEP
         its share of the two ends' sum (0: it keeps its place).
     pairs : ndarray, shape (pairs, 2), int
     lengths : ndarray, shape (pairs,)
+    spreads : ndarray, shape (pairs,), optional
+        How far each pair's distance strays (SD, metres): a pair is kept as a measurement of
+        that variance against the ends' uncertainties (compliant position-based dynamics,
+        XPBD); None: every distance exactly.
 
     Returns
     -------
@@ -42,22 +49,30 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, sweeps=SWEEP
     >>> keep_distances(pos, np.array([[False, True]]), np.ones((1, 2)), np.array([[0, 1]]),
     ...                np.array([1.0]))[0, 1].tolist()
     [1.0, 0.0, 0.0]
+    >>> keep_distances(pos, np.array([[False, True]]), np.ones((1, 2)), np.array([[0, 1]]),
+    ...                np.array([1.0]), spreads=np.array([1.0]))[0, 1].round(6).tolist()
+    [1.5, 0.0, 0.0]
     """
     out = np.array(positions, dtype=np.float64)
     filled = np.isfinite(out[..., 0])
     share = np.where(missing & filled, uncertainty, 0.0)
     share[~filled] = np.nan
+    compliance = np.zeros(len(pairs)) if spreads is None else np.asarray(spreads) ** 2
     steps = []
-    for (a, b), length in zip(pairs, lengths):
+    for (a, b), length, alpha in zip(pairs, lengths, compliance):
         total = share[:, a] + share[:, b]
         frames = np.flatnonzero(total > 0)  # NaN (a sample without a fill) compares False
         if frames.size:
-            steps.append((a, b, length, frames, (share[frames, a] / total[frames])[:, None]))
+            steps.append((a, b, length, frames, share[frames, a][:, None],
+                          share[frames, b][:, None], alpha, np.zeros((frames.size, 1))))
     for _ in range(sweeps):
-        for a, b, length, frames, part in steps:
+        for a, b, length, frames, share_a, share_b, alpha, pull in steps:
             apart = out[frames, a] - out[frames, b]
-            distance = np.linalg.norm(apart, axis=1)
-            step = ((distance - length) / np.maximum(distance, 1e-9))[:, None] * apart
-            out[frames, a] -= part * step
-            out[frames, b] += (1 - part) * step
+            distance = np.linalg.norm(apart, axis=1)[:, None]
+            # the pair's pull so far counts against its compliance (XPBD's multiplier)
+            more = (length - distance - alpha * pull) / (share_a + share_b + alpha)
+            pull += more
+            toward = apart / np.maximum(distance, 1e-9)
+            out[frames, a] += share_a * more * toward
+            out[frames, b] -= share_b * more * toward
     return out

@@ -32,6 +32,11 @@ TAKE_ALONE = "auto fills from the take alone (rigid partners, a spline, a partne
 #: partners alone made 4.5; docs/METHOD_NOTES.md, session 44)
 AUTO_PROBES = 5
 AUTO_PROBE_FRAMES = 30
+#: metres: on a marker set, pairs whose distance strays by at most this much (SD) are kept last,
+#: each as far as its spread lets it (docs/METHOD_NOTES.md, session 48); a skeleton keeps its
+#: exact ones (baselines.RIGID_TIE) exactly
+AUTO_KEPT_SPREAD = 0.005
+
 #: donors of ``auto``'s rigid-body estimate
 AUTO_DONORS = 3
 #: ``auto`` lets rigid partners alone carry a point whose copies they refill better than the
@@ -503,7 +508,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         kb_side = float(shares[a:b + 1, p].mean())
         spline_share, pattern_share, squared = eased.get(
             (p, a), (0.0, 0.0, per_sample[p] * harder(p, a, b, kb_side)))
-        uncertainty[a:b + 1, p] = squared
+        # a marker's short gaps, where the spline and a partner's pattern come closer than a
+        # few millimetres of sliding skin, hold their place
+        uncertainty[a:b + 1, p] = (0.0 if motion.parents is None
+                                   and b - a < _spline_frames(motion.fps) else squared)
         rest = 1 - spline_share - pattern_share
         kb_share = kb_side * rest
         models = kb_share * (1 - by_partner[p])  # the models, the windows and the regression
@@ -518,7 +526,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
 
 def _with_distances_kept(motion, out, uncertainty, report):
     """The fill ``out`` with the take's missing samples moved onto the distances it keeps
-    exactly (:func:`~.baselines.exact_pairs`, :func:`~.distances.keep_distances`), each by its
+    exactly (a skeleton) or towards those it keeps within :data:`AUTO_KEPT_SPREAD` (a marker
+    set, each pair as far as its spread lets it; :func:`~.baselines.steady_pairs`,
+    :func:`~.distances.keep_distances`), each by its
     expected squared error ``uncertainty`` (where unknown: the largest known, else 1 m^2; at
     least :data:`~.baselines.RIGID_TIE` squared). The gaps' estimates stay those of the fill
     before: moved alike, the copies (more points hidden at once) judged the move worse than it
@@ -526,21 +536,27 @@ def _with_distances_kept(motion, out, uncertainty, report):
     from .distances import keep_distances
 
     missing = motion.missing
-    pairs, lengths = baselines.exact_pairs(motion.positions)
+    markers = motion.parents is None  # a skeleton's bones are exact; markers slide on the skin
+    pairs, lengths, spreads = baselines.steady_pairs(
+        motion.positions, AUTO_KEPT_SPREAD if markers else baselines.RIGID_TIE)
     if not (missing[:, pairs[:, 0]] | missing[:, pairs[:, 1]]).any():
         return out
     known = np.isfinite(uncertainty) & missing
     fallback = uncertainty[known].max() if known.any() else 1.0
-    # no filled sample is surer of its place than the rounding of a rigid tie
-    uncertainty = np.where(missing, np.maximum(np.where(known, uncertainty, fallback),
-                                               baselines.RIGID_TIE ** 2), 0.0)
-    kept = keep_distances(out, missing, uncertainty, pairs, lengths)
+    hold = missing & (uncertainty == 0) & markers  # a marker's short gaps hold their place
+    # no other filled sample is surer of its place than the rounding of a rigid tie
+    uncertainty = np.where(missing & ~hold, np.maximum(np.where(known, uncertainty, fallback),
+                                                       baselines.RIGID_TIE ** 2), 0.0)
+    kept = keep_distances(out, missing, uncertainty, pairs, lengths,
+                          spreads if markers else None)
     moved = np.linalg.norm(kept - out, axis=2)[missing]
     moved = moved[np.isfinite(moved)]
     if moved.size:
-        report(f"auto: filled samples moved onto the {len(pairs)} distances the take keeps "
-               f"exactly (a bone's length, joints on one segment): median "
-               f"{1000 * np.median(moved):.1f} mm, at most {1000 * moved.max():.1f} mm")
+        report(f"auto: filled samples moved towards the {len(pairs)} distances the take keeps"
+               + (f" within {1000 * AUTO_KEPT_SPREAD:g} mm (markers on one segment)" if markers
+                  else " exactly (a bone's length, joints on one segment)")
+               + f": median {1000 * np.median(moved):.1f} mm, at most "
+               f"{1000 * moved.max():.1f} mm")
     return kept
 
 
