@@ -58,7 +58,7 @@ def test_a_pairs_correction_goes_to_the_end_less_sure_of_its_place():
     assert np.isnan(kept[2, 2]).all() and (kept[2, 1] == guess[2, 1]).all()
 
 
-def test_exact_pairs_are_a_skeletons_bones_and_segments_not_a_markers_skin(data_dir):
+def test_steady_pairs_are_a_skeletons_bones_and_segments_and_a_markers_segment(data_dir):
     daz = read_motion(data_dir / "cmu/bvh/daz_friendly/07/07_05.bvh.gz")
     pairs, lengths = baselines.steady_pairs(daz.positions)[:2]
     found = {tuple(p) for p in pairs.tolist()}
@@ -66,8 +66,13 @@ def test_exact_pairs_are_a_skeletons_bones_and_segments_not_a_markers_skin(data_
     assert bones <= found and len(found) > len(bones)  # and joints on one segment
     assert (np.abs(np.linalg.norm(daz.positions[:, pairs[:, 0]] - daz.positions[:, pairs[:, 1]],
                                   axis=2) - lengths) < 1e-3).all()
-    cmu = read_motion(data_dir / "cmu/c3d/85_02.c3d").positions
-    assert len(baselines.steady_pairs(cmu)[0]) == 0 < len(baselines.steady_pairs(cmu, 0.005)[0])
+    cmu = read_motion(data_dir / "cmu/c3d/85_02.c3d")
+    assert len(baselines.steady_pairs(cmu.positions)[0]) == 0  # skin slides
+    pairs, lengths, spreads = baselines.steady_pairs(cmu.positions, 0.005)
+    head = ("LFHD", "RFHD", "LBHD", "RBHD")
+    named = {frozenset((cmu.names[a], cmu.names[b])) for a, b in pairs}
+    assert all(frozenset((a, b)) in named for i, a in enumerate(head) for b in head[i + 1:])
+    assert (spreads <= 0.005).all() and (spreads > baselines.RIGID_TIE).all()
 
 
 def test_auto_keeps_a_skeletons_bones_on_a_take_it_never_saw(data_dir, monkeypatch):
