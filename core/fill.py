@@ -528,11 +528,11 @@ def _with_distances_kept(motion, out, uncertainty, report):
     """The fill ``out`` with the take's missing samples moved onto the distances it keeps
     exactly (a skeleton) or towards those it keeps within :data:`AUTO_KEPT_SPREAD` (a marker
     set, each pair as far as its spread lets it; :func:`~.baselines.steady_pairs`,
-    :func:`~.distances.keep_distances`), each by its
-    expected squared error ``uncertainty`` (where unknown: the largest known, else 1 m^2; at
-    least :data:`~.baselines.RIGID_TIE` squared). The gaps' estimates stay those of the fill
-    before: moved alike, the copies (more points hidden at once) judged the move worse than it
-    is on the gaps (docs/METHOD_NOTES.md, session 48)."""
+    :func:`~.distances.keep_distances`), each by its expected squared error ``uncertainty``
+    (where unknown: the largest known, else 1 m^2; at least :data:`~.baselines.RIGID_TIE`
+    squared, but on a marker set 0 holds: its short gaps). The gaps' estimates stay those of
+    the fill before: moved alike, the copies (more points hidden at once) judged the move worse
+    than it is on the gaps (docs/METHOD_NOTES.md, session 48)."""
     from .distances import keep_distances
 
     missing = motion.missing
