@@ -83,7 +83,8 @@ def test_auto_keeps_a_skeletons_bones_on_a_take_it_never_saw(data_dir, monkeypat
     mm on the median, 3.5 mm on the 99th percentile, against 1.0 and 33.5)."""
     take = read_motion(data_dir / "cmu/asfamc/07/07_05.amc")
     take = take.replace(positions=resample(take.positions, take.fps, 60.0), fps=60.0)
-    kb = kb_without(build_kb([data_dir / "cmu/asfamc"], fps=60.0, exclude=["*02_01.amc"]), subject_of(take.source))
+    kb = kb_without(build_kb([data_dir / "cmu/asfamc"], fps=60.0, exclude=["*02_01.amc"]),
+                    subject_of(take.source))
     miss = punch_gaps(take.n_frames, take.n_points, "joints", (6, 60),
                       np.random.default_rng([0, *b"m=6,l=60"]), take.names)
     query = with_gaps(take, miss)
