@@ -308,7 +308,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     their ends (:func:`_with_spline_ends`); short gaps (:data:`AUTO_SPLINE_SECONDS`) are last
     blended with that spline and a partner's pattern by their errors on copies of each gap
     (:func:`_with_spline`), those at a clip end with the pattern from the one end alone, by
-    errors on one-sided copies (:func:`_with_pattern_ends`).
+    errors on one-sided copies (:func:`_with_pattern_ends`). Last, the fill is moved onto the
+    distances the take keeps exactly, on a marker set towards those it keeps within a few
+    millimetres (:func:`_with_distances_kept`).
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
