@@ -8,7 +8,8 @@ candidate is scored from one fill of each.
     python tools/bone_rules.py TUNE_OUT [TUNE_OUT ...]
 
 Prints, per rule, the mean over takes of the RMSE as a ratio to ``interp`` for each setting
-(n=1 then n=3, l = 15 ... 240) and the gaps worse than ``interp`` by more than 10 % + 2 mm.
+(n=1 then n=3, l = 15 ... 240) and the gaps worse than ``interp`` by more than 10 % + 2 mm; last,
+the best fill of each gap among those saved (an oracle: the judge's headroom).
 """
 
 import sys
@@ -99,6 +100,20 @@ RULES = {
 }
 
 
+def oracle(runs):
+    """As :func:`evaluate`, for the best fill of each gap among ``interp`` and every candidate
+    (and blend towards ``match``) saved: what a judge that knew the truth would reach."""
+    settings = sorted({s for _, s, _ in runs}, key=lambda s: (s[2], int(s.split("l=")[1])))
+    ratios = {s: [] for s in settings}
+    for _, setting, z in runs:
+        fills = [k for k in z if k.startswith("gap_") and not k.endswith("_dev")
+                 and k not in ("gap_len", "gap_joints")]
+        best = np.min([z[k] for k in fills], axis=0)
+        if z["gap_interp"].sum() > 0:
+            ratios[setting].append(np.sqrt(best.sum() / z["gap_interp"].sum()))
+    return [np.mean(ratios[s]) for s in settings], fills
+
+
 def main(folders):
     runs = []
     for folder in folders:
@@ -110,6 +125,10 @@ def main(folders):
         ratios, worse, gaps = evaluate(runs, **rule)
         print(f"| {label} | {' / '.join(f'{r:.2f}' for r in ratios[:5])} | "
               f"{' / '.join(f'{r:.2f}' for r in ratios[5:])} | {worse} of {gaps} |")
+    ratios, fills = oracle(runs)
+    print(f"| the best per gap of {', '.join(f[4:] for f in fills)} | "
+          f"{' / '.join(f'{r:.2f}' for r in ratios[:5])} | "
+          f"{' / '.join(f'{r:.2f}' for r in ratios[5:])} | 0 |")
 
 
 if __name__ == "__main__":
