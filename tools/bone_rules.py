@@ -105,9 +105,9 @@ def oracle(runs):
     (and blend towards ``match``) saved: what a judge that knew the truth would reach."""
     settings = sorted({s for _, s, _ in runs}, key=lambda s: (s[2], int(s.split("l=")[1])))
     ratios = {s: [] for s in settings}
+    fills = [k for k in runs[0][2] if k.startswith("gap_") and not k.endswith("_dev")
+             and k not in ("gap_len", "gap_joints")]  # every run saved the same fills
     for _, setting, z in runs:
-        fills = [k for k in z if k.startswith("gap_") and not k.endswith("_dev")
-                 and k not in ("gap_len", "gap_joints")]
         best = np.min([z[k] for k in fills], axis=0)
         if z["gap_interp"].sum() > 0:
             ratios[setting].append(np.sqrt(best.sum() / z["gap_interp"].sum()))
