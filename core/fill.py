@@ -506,14 +506,16 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     accounts = []
     harder = _harder_for_partners(*spreads)
     uncertainty = np.zeros(missing.shape)  # each gap's squared error expected
+    # a marker's short gaps, where the spline and a partner's pattern come closer than a few
+    # millimetres of sliding skin, hold their place when the distances are kept
+    hold = np.zeros(missing.shape, bool)
     for p, a, b in gap_runs(missing):
         kb_side = float(shares[a:b + 1, p].mean())
         spline_share, pattern_share, squared = eased.get(
             (p, a), (0.0, 0.0, per_sample[p] * harder(p, a, b, kb_side)))
-        # a marker's short gaps, where the spline and a partner's pattern come closer than a
-        # few millimetres of sliding skin, hold their place
-        uncertainty[a:b + 1, p] = (0.0 if motion.parents is None
-                                   and b - a < _spline_frames(motion.fps) else squared)
+        hold[a:b + 1, p] = motion.parents is None and b - a < _spline_frames(motion.fps)
+        # (a held sample counts as known and sure where the others' fallback is taken)
+        uncertainty[a:b + 1, p] = 0.0 if hold[a, p] else squared
         rest = 1 - spline_share - pattern_share
         kb_share = kb_side * rest
         models = kb_share * (1 - by_partner[p])  # the models, the windows and the regression
@@ -523,18 +525,19 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             windows=float(models * windows[p] * (1 - own[p])), own=float(models * own[p]),
             spline=float(spline_share), pattern=float(pattern_share + kb_share * by_partner[p]),
             estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
-    return _with_fill(motion, _with_distances_kept(motion, out, uncertainty, report)), accounts
+    out = _with_distances_kept(motion, out, uncertainty, hold, report)
+    return _with_fill(motion, out), accounts
 
 
-def _with_distances_kept(motion, out, uncertainty, report):
+def _with_distances_kept(motion, out, uncertainty, hold, report):
     """The fill ``out`` with the take's missing samples moved onto the distances it keeps
     exactly (a skeleton) or towards those it keeps within :data:`AUTO_KEPT_SPREAD` (a marker
     set, each pair as far as its spread lets it; :func:`~.baselines.steady_pairs`,
     :func:`~.distances.keep_distances`), each by its expected squared error ``uncertainty``
     (where unknown: the largest known, else 1 m^2; at least :data:`~.baselines.RIGID_TIE`
-    squared, but on a marker set 0 holds: its short gaps). The gaps' estimates stay those of
-    the fill before: moved alike, the copies (more points hidden at once) judged the move worse
-    than it is on the gaps (docs/METHOD_NOTES.md, session 48)."""
+    squared); the samples of ``hold`` (a marker's short gaps) keep their place. The gaps'
+    estimates stay those of the fill before: moved alike, the copies (more points hidden at
+    once) judged the move worse than it is on the gaps (docs/METHOD_NOTES.md, session 48)."""
     from .distances import keep_distances
 
     missing = motion.missing
@@ -545,8 +548,7 @@ def _with_distances_kept(motion, out, uncertainty, report):
         return out
     known = np.isfinite(uncertainty) & missing
     fallback = uncertainty[known].max() if known.any() else 1.0
-    hold = missing & (uncertainty == 0) & markers  # a marker's short gaps hold their place
-    # no other filled sample is surer of its place than the rounding of a rigid tie
+    # no filled sample that moves is surer of its place than the rounding of a rigid tie
     uncertainty = np.where(missing & ~hold, np.maximum(np.where(known, uncertainty, fallback),
                                                        baselines.RIGID_TIE ** 2), 0.0)
     kept = keep_distances(out, missing, uncertainty, pairs, lengths,

@@ -126,8 +126,8 @@ def test_auto_keeps_a_marker_sets_steady_distances_as_far_as_they_hold(data_dir,
     seen = {}
     keep = fills._with_distances_kept
 
-    def spy(motion, out, uncertainty, report):
-        seen["before"], seen["after"] = out, keep(motion, out, uncertainty, report)
+    def spy(motion, out, *rest):
+        seen["before"], seen["after"] = out, keep(motion, out, *rest)
         return seen["after"]
 
     monkeypatch.setattr(fills, "_with_distances_kept", spy)
