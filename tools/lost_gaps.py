@@ -9,7 +9,8 @@ veto or cap can be scored without filling again; and (session 41) how much calme
 about the gapped one move over the gap than over its copies.
 
     python tools/lost_gaps.py OUT.jsonl            # run (the Daz tuning takes; AMC=1: ASF/AMC;
-                                                   # TAKES=01_08,02_05: only those)
+                                                   # TAKES=01_08,02_05: only those; NO_KB=1:
+                                                   # without a knowledge base)
     python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, session 38
 """
 
@@ -34,7 +35,7 @@ STEPS = np.linspace(0.0, 1.0, 21)
 
 def run(out):
     amc = bool(os.environ.get("AMC"))
-    full = armature_kb(amc)
+    full = None if os.environ.get("NO_KB") else armature_kb(amc)
     paths = ([AMC / f"{t}.amc" for t in AMC_TUNING] if amc
              else [DAZ / t[:2] / f"{t}.bvh.gz" for t in DAZ_TUNING])
     only = os.environ.get("TAKES")
@@ -42,7 +43,7 @@ def run(out):
     with open(out, "w") as sink:
         for path in paths:
             rig, channels, location, fps = read_rig_take(path, skip_frames=0 if amc else 6)
-            kb = kb_without(full, subject_of(path))
+            kb = None if full is None else kb_without(full, subject_of(path))
             truth = rig.joints(basis_matrices(rig, channels, location))
             below = rig.placed_by()
             for n, l in BONE_SETTINGS:
