@@ -43,10 +43,11 @@ frames:
   beside; every gap of ``LONG_STACK`` seconds or more that does not keep ``interp`` then goes
   halfway on to the mean of ``match`` and ``regress_kernel`` (``CONSENSUS``: three estimates
   from different evidence, averaged); the shorter gaps go from ``interp`` towards their fill
-  only as far as the fills agree on the gap; in a take too short for copies, a long gap keeps
-  ``interp`` where it and ``regress`` agree far more closely than either does with ``match``,
-  and takes the mean of ``match`` and ``regress_kernel`` where ``match`` would fill it unjudged
-  (``UNJUDGED_CONSENSUS``);
+  only as far as the fills agree on the gap, and as far as it departs from ``interp`` beyond
+  the error its copies expect of it (``AUTO_WARY``); in a take too short for copies, a long
+  gap keeps ``interp`` where it and ``regress`` agree far more closely than either does with
+  ``match``, and takes the mean of ``match`` and ``regress_kernel`` where ``match`` would fill
+  it unjudged (``UNJUDGED_CONSENSUS``);
   with a knowledge base of positions only, ``knn``, ``half`` (half-way from ``interp`` to
   ``knn``) and ``recall`` (subtrees carried onto the knowledge base's guess from the known
   joints alone: a KB that holds the motion) stand in; without a knowledge base (a rig no
@@ -115,6 +116,12 @@ CONSENSUS_FILLS = ("match", "regress_kernel")
 #: (:meth:`_Job._doubted`): the weight of their spread against the departure from ``interp``
 #: (tuned, docs/METHOD_NOTES.md; ``stack_long`` went undoubted in session 26)
 AUTO_DOUBT = 0.1
+#: and then only as far as its departure from ``interp`` stands out of the fill's own error on
+#: the gap's copies: the share is cut by ``max(0, 1 - AUTO_WARY * E / A)``, ``E`` the fill's
+#: mean squared joint error expected from the copies, ``A`` the gap's squared departure (a
+#: shrinkage towards the interpolation; chosen on non-test takes, docs/METHOD_NOTES.md,
+#: session 50)
+AUTO_WARY = 0.1
 #: ``regress``: the other bones' channels this many seconds either side count too; fitted within
 #: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
 REGRESS_LAGS = (0.05, 0.1)
@@ -610,6 +617,7 @@ class _Job:
             choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps
                        else names[1], 1.0) for _, a, e in runs]
         estimates = [float("nan")] * len(runs)
+        expected = [float("nan")] * len(runs)  # the chosen fill's mean squared joint error
         longest = [rotations and (e - a + 1) >= LONG_STACK * self.fps
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
@@ -640,6 +648,7 @@ class _Job:
                                                lambda b, a: of_copy.get((b, a), table))
                 names = names + ("stack",)
             base = self._errors(tried["interp"], truth, copies)
+            samples = np.array([c[3] * np.count_nonzero(self.moved_by(c[1])) for c in copies])
             # log error ratio to interpolation per copy (1 mm^2 per joint and frame keeps still
             # bones at 0); per gap the mean over its copies, shrunk towards the take's mean
             floor = np.array([1e-6 * c[3] * (self.below[c[1]].sum() + 1) for c in copies])
@@ -663,6 +672,9 @@ class _Job:
                     choice[i] = ("stack_long", 1.0)  # too few copies of its own to judge by
                 if choice[i] in score:  # as a ratio of RMS errors, not of squared ones
                     estimates[i] = float(np.exp(score[choice[i]] / 2))
+                    if own.any():  # that ratio of the interpolation's RMS error on them
+                        expected[i] = (estimates[i]
+                                       * np.mean(np.sqrt(base[own] / samples[own]))) ** 2
         wanted = np.zeros_like(gaps)
         for (b, a, e), (name, _) in zip(runs, choice):
             wanted[a:e + 1, b] = name != "interp"
@@ -672,7 +684,7 @@ class _Job:
             if stack:
                 made["stack"] = self._stacked(made, wanted, self.stack_fills,
                                               lambda b, a: table)
-                choice = self._doubted(made, runs, choice)
+                choice = self._doubted(made, runs, choice, expected)
             if any(longest):
                 made["stack_long"] = self._stacked(made, wanted, self.long_fills,
                                                    lambda b, a: long_table)
@@ -688,6 +700,7 @@ class _Job:
                           for (name, share), on in zip(choice, onward)]
         counts, partly = {}, {}
         for name, share in choice:
+            name = name if share else "interp"  # doubted all the way back
             counts[name] = counts.get(name, 0) + 1
             partly[name] = partly.get(name, 0) + (0 < share < 1)
         onwards = "; ".join(
@@ -703,7 +716,7 @@ class _Job:
             return seen
         out = seen.copy()
         for (b, a, e), (name, share), further in zip(runs, choice, self.consensus):
-            if name == "interp":
+            if name == "interp" or not share:
                 continue
             span, rows = np.ones((e - a + 1, 1), bool), slice(a, e + 1)
             fill = halfway(seen[rows, b:b + 1], made[name][rows, b:b + 1], span, share)
@@ -743,12 +756,17 @@ class _Job:
                 out[i] = ("interp", 0.0)
         return out
 
-    def _doubted(self, made, runs, choice):
+    def _doubted(self, made, runs, choice, expected):
         """``choice`` with the share of each gap shorter than :data:`LONG_STACK` cut to ``A / (A
         + AUTO_DOUBT * D)`` of itself: ``A`` the squared joint departure of the share's blend
         from ``interp`` on the gap, ``D`` the mean squared spread of the stacked fills (those of
         :data:`STACK_FILLS` but ``interp``) about their stack there: the fills that agree on the
-        gap are believed, the others hardly. Longer gaps keep their fill."""
+        gap are believed, the others hardly. Then, where the gap's copies ``expected`` the fill
+        an error (mean squared, per joint and frame; NaN: unknown), by ``max(0, 1 - AUTO_WARY *
+        expected / a)``, ``a`` the mean squared departure so cut: a gap calmer than its copies
+        departs little beyond the fill's own error, and keeps about the interpolation (the
+        gaps the fill lost, docs/METHOD_NOTES.md, sessions 38 and 50). Longer gaps keep their
+        fill."""
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (name, _)) in enumerate(zip(runs, choice))
                  if name != "interp" and e - a + 1 < LONG_STACK * self.fps]
         if not spans:
@@ -763,7 +781,11 @@ class _Job:
             away = share ** 2 * np.sum((at[name] - at["interp"]) ** 2)
             doubt = np.mean([np.sum((at[fill] - at["stack"]) ** 2)
                              for fill in self.stack_fills[1:]])
-            choice[i] = (name, share * float(away / (away + AUTO_DOUBT * doubt + 1e-12)))
+            cut = float(away / (away + AUTO_DOUBT * doubt + 1e-12))
+            if np.isfinite(expected[i]):  # the departure so cut, per joint and frame
+                departure = cut ** 2 * away / (at[name].shape[0] * at[name].shape[1])
+                cut *= max(0.0, 1 - AUTO_WARY * expected[i] / max(departure, 1e-18))
+            choice[i] = (name, share * cut)
         return choice
 
     def _stack_tables(self, made, truth, copies, fills):

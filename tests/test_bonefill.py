@@ -475,7 +475,10 @@ def test_stacking_weighs_each_fill_where_it_is_right():
 def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, daz_kb):
     """The doubt of ``auto`` (``_Job._doubted``) on the walk's real poses: a gap's fill whose
     stacked fills all agree keeps its share; the same fill where they scatter about it keeps
-    a small part of it; a long gap keeps its fill untouched, ``stack_long`` too."""
+    a small part of it; a long gap keeps its fill untouched, ``stack_long`` too. A short gap
+    whose copies expect the fill an error as large as its departure from the interpolation
+    comes back towards the interpolation (``AUTO_WARY``), all the way where the error is
+    larger still; the long gap keeps its fill whatever its copies said."""
     rig, channels, location, fps = walk
     b = rig.names.index("lShldr")
     gaps = np.zeros(channels.shape[:2], bool)
@@ -487,15 +490,27 @@ def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, d
     choice = [("match", 0.75), ("match", 1.0)]
     agree = {"interp": interp, "stack": truth, "hermite": truth, "match": truth,
              "regress": truth}
-    kept = job._doubted(agree, runs, choice)
+    unknown = [np.nan, np.nan]
+    kept = job._doubted(agree, runs, choice, unknown)
     assert kept[0][1] == pytest.approx(0.75) and kept[1] == ("match", 1.0)
+    # the departure of that share's blend: mean squared, per joint and frame
+    joints = job.moved_by(b)
+    away = 0.75 ** 2 * np.mean(np.sum((job.world(truth)[200:230, joints]
+                                       - job.world(interp)[200:230, joints]) ** 2, axis=-1))
+    assert away > 2e-5  # the blend departs from the interpolation (measured 7.4 mm RMS)
+    half = job._doubted(agree, runs, choice, [away / bonefill.AUTO_WARY / 2, 1.0])
+    assert half[0] == ("match", pytest.approx(0.75 / 2)) and half[1] == ("match", 1.0)
+    assert job._doubted(agree, runs, choice, [away / bonefill.AUTO_WARY, 1.0])[0] == (
+        "match", 0.0)
+    assert job._doubted(agree, runs, choice, [away / 1e4, 1.0])[0][1] == pytest.approx(
+        0.75 * (1 - bonefill.AUTO_WARY / 1e4))
     off = truth.copy()
     off[gaps, :3, :3] = Rotation.from_rotvec([0.0, 0.0, 1.5]).as_matrix() @ truth[gaps, :3, :3]
     scatter = dict(agree, hermite=interp, regress=off)
-    cut = job._doubted(scatter, runs, choice)
+    cut = job._doubted(scatter, runs, choice, unknown)
     assert 0 < cut[0][1] < 0.75 / 2 and cut[1] == ("match", 1.0)
     longs = [("interp", 0.0), ("stack_long", 1.0)]
-    assert job._doubted(dict(scatter, stack_long=truth), runs, longs) == longs
+    assert job._doubted(dict(scatter, stack_long=truth), runs, longs, [1.0, 1.0]) == longs
 
 
 def test_a_take_too_short_for_copies_stacks_long_gaps_of_several_bones(walk, daz_kb):
