@@ -308,7 +308,8 @@ def apply_fill(context, plans, results):
 def how_filled(choices, bone, first, last):
     """``(how, estimate, 0)`` of a listed gap of ``bone`` over the take's rows ``first``-``last``
     from the rotation fill's choices of the gaps it overlaps: the fill (``interp``: Blender's
-    interpolation kept; with the share of the way from it where the fill went part of the way,
+    interpolation kept, also where the copies' fill was doubted all the way back to it; with
+    the share of the way from it where the fill went part of the way,
     and how far on towards the consensus: the knowledge base's motion and the take's own
     regression, or the regression alone without a knowledge base)
     and the copies' estimate of its error as a share of the interpolation's (the largest where
@@ -317,7 +318,8 @@ def how_filled(choices, bone, first, last):
     parts = [c for c in choices if c.bone == bone and c.first <= last and c.last >= first]
     if not parts:
         return "", 0.0, 0.0
-    labels = [(c.method if c.share in (0.0, 1.0) else f"{c.method} ({c.share:.0%} of the way)")
+    labels = [("interp" if c.share == 0 else c.method if c.share == 1
+               else f"{c.method} ({c.share:.0%} of the way)")
               + (f", then the mean of {c.towards}" if c.consensus == 1 else
                  f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
               for c in parts]
