@@ -355,7 +355,7 @@ def describe(gap, armature):
     """How a filled gap was filled, in lines of words (the panel and ``blend`` say them)."""
     if not gap.how:
         return []
-    if armature and gap.how == "interp":  # a judged fill there departed within its own error
+    if armature and gap.how == "interp":  # judged by copies: the fill doubted all the way back
         return ["Blender's interpolation kept", "(the copies' best fill moved it less than its "
                 "own error)" if gap.estimate else "(no fill was judged better there)"]
     if armature:  # the long-gap consensus on a line of its own (the panel is narrow)
