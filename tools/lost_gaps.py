@@ -10,7 +10,9 @@ about the gapped one move over the gap than over its copies.
 
     python tools/lost_gaps.py OUT.jsonl            # run (the Daz tuning takes; AMC=1: ASF/AMC;
                                                    # TAKES=01_08,02_05: only those; NO_KB=1:
-                                                   # without a knowledge base)
+                                                   # without a knowledge base; FILLS=hermite,
+                                                   # regress,match: those fills' departure,
+                                                   # distance to auto's and error too)
     python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, session 38
 """
 
@@ -55,6 +57,14 @@ def run(out):
                 shown = rig.joints(basis_matrices(rig, seen, location))
                 filled, choices = fill_bones(rig, seen, location, gaps, fps, kb=kb,
                                              return_choices=True)
+                alone = []  # auto's fill of each gap's bone alone, the others interpolated
+                for b, a, e in gap_runs(gaps):
+                    one = basis_matrices(rig, seen[a:e + 1], location[a:e + 1])
+                    one[:, b] = filled[a:e + 1, b]
+                    alone.append(rig.joints(one))
+                others = {name: rig.joints(fill_bones(rig, seen, location, gaps, fps, kb=kb,
+                                                      method=name))
+                          for name in os.environ.get("FILLS", "").split(",") if name}
                 filled = rig.joints(filled)
                 copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
                 probe = np.zeros_like(gaps)
@@ -79,6 +89,10 @@ def run(out):
                         "method": choice.method, "share": choice.share,
                         "estimate": choice.estimate, "consensus": choice.consensus,
                         "departure_mm": 1000 * _rms(f - s),
+                        "own_departure_mm": 1000 * _rms(alone[i][:, joints] - s),
+                        # per other fill: its departure, distance to auto's fill, error
+                        "fills_mm": {name: [1000 * _rms(o[rows, joints] - x)
+                                            for x in (s, f, t)] for name, o in others.items()},
                         "copies_interp_mm": float(np.mean(copy_mm)) if copy_mm else None,
                         "key_speed_mm": float(np.mean(speed)) if speed else None,
                         "curve_mm": [1000 * _rms(s + step * (f - s) - t) for step in STEPS],
