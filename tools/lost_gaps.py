@@ -93,6 +93,9 @@ def run(out):
                         # per other fill: its departure, distance to auto's fill, error
                         "fills_mm": {name: [1000 * _rms(o[rows, joints] - x)
                                             for x in (s, f, t)] for name, o in others.items()},
+                        "apart_mm": {f"{x}-{y}": 1000 * _rms(others[x][rows, joints]
+                                                            - others[y][rows, joints])
+                                     for k, x in enumerate(others) for y in list(others)[k + 1:]},
                         "copies_interp_mm": float(np.mean(copy_mm)) if copy_mm else None,
                         "key_speed_mm": float(np.mean(speed)) if speed else None,
                         "curve_mm": [1000 * _rms(s + step * (f - s) - t) for step in STEPS],
