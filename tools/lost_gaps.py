@@ -12,7 +12,8 @@ about the gapped one move over the gap than over its copies.
                                                    # TAKES=01_08,02_05: only those; NO_KB=1:
                                                    # without a knowledge base; FILLS=hermite,
                                                    # regress,match: those fills' departure,
-                                                   # distance to auto's and error too)
+                                                   # distance to auto's, error and distances
+                                                   # from each other too)
     python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, session 38
 """
 
