@@ -15,6 +15,8 @@ about the gapped one move over the gap than over its copies.
                                                    # distance to auto's, error and distances
                                                    # from each other too)
     python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, session 38
+    python tools/lost_gaps.py --tell OUT.jsonl     # how well each measure known at fill time
+                                                   # tells the lost gaps (session 51; a FILLS run)
 """
 
 import json
@@ -210,8 +212,51 @@ def score(path):
     print("lost by take:", dict(Counter(r["take"] for r in lost)))
 
 
+def tell(path):
+    """Over the gaps ``auto`` moved, the area under the ROC curve of each measure known at fill
+    time for "lost" and for "the best blend goes less than half as far as the fill" (its share
+    from the error's quadratic along the blend, exact in the joints): 0.5 tells nothing, 1
+    tells all (below 0.5: it tells them the other way round)."""
+    rows = [json.loads(line) for line in open(path)]
+    moved = [r for r in rows if r["method"] != "interp" and r["share"] > 0
+             and r["departure_mm"] > 1e-3]
+    curve = np.array([[r["curve_mm"][0], r["curve_mm"][-1], r["departure_mm"]] for r in moved])
+    lost = curve[:, 1] > 1.1 * curve[:, 0] + 2
+    best = (curve[:, 2] ** 2 - (curve[:, 1] ** 2 - curve[:, 0] ** 2)) / 2 / curve[:, 2] ** 2
+    back = best < 0.5
+    away = curve[:, 2]
+    estimate = np.array([r["estimate"] if np.isfinite(r["estimate"]) else 1.0 for r in moved])
+    copies = np.array([r["copies_interp_mm"] or 1.0 for r in moved])
+    measures = {
+        "the copies' estimate": estimate,
+        "expected error / departure": estimate * copies / away,
+        "the same, the bone's own departure": estimate * copies
+        / np.maximum([r["own_departure_mm"] for r in moved], 1e-3),
+        "gap length": np.array([r["l"] for r in moved], float),
+        "key speed / departure": np.array([r["key_speed_mm"] or 3.0 for r in moved]) / away,
+        "calm (session 41)": np.array([r["calm_log"] or 0.0 for r in moved]),
+        **{f"{name}'s distance from the fill / departure":
+           np.array([r["fills_mm"][name][1] for r in moved]) / away
+           for name in moved[0]["fills_mm"]},
+        **{f"{name}'s departure / the fill's":
+           np.array([r["fills_mm"][name][0] for r in moved]) / away
+           for name in moved[0]["fills_mm"]}}
+    print(f"{len(moved)} gaps moved, {lost.sum()} lost, {back.sum()} best less than half way")
+    for name, values in measures.items():
+        print(f"{name:44s} lost {_auc(values, lost):.2f}, best half way {_auc(values, back):.2f}")
+
+
+def _auc(score, positive):
+    """The chance that a positive scores above a negative (ties: the rank order)."""
+    rank = np.empty(len(score))
+    rank[np.argsort(score, kind="stable")] = np.arange(len(score))
+    return (rank[positive].mean() - (positive.sum() - 1) / 2) / (~positive).sum()
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "--score":
         score(sys.argv[2])
+    elif sys.argv[1] == "--tell":
+        tell(sys.argv[2])
     else:
         run(sys.argv[1])
