@@ -220,11 +220,10 @@ def tell(path):
     rows = [json.loads(line) for line in open(path)]
     moved = [r for r in rows if r["method"] != "interp" and r["share"] > 0
              and r["departure_mm"] > 1e-3]
-    curve = np.array([[r["curve_mm"][0], r["curve_mm"][-1], r["departure_mm"]] for r in moved])
-    lost = curve[:, 1] > 1.1 * curve[:, 0] + 2
-    best = (curve[:, 2] ** 2 - (curve[:, 1] ** 2 - curve[:, 0] ** 2)) / 2 / curve[:, 2] ** 2
-    back = best < 0.5
-    away = curve[:, 2]
+    interp, fill, away = np.array([[r["curve_mm"][0], r["curve_mm"][-1], r["departure_mm"]]
+                                   for r in moved]).T
+    lost = fill > 1.1 * interp + 2
+    back = (away ** 2 - (fill ** 2 - interp ** 2)) / 2 / away ** 2 < 0.5  # the best share
     estimate = np.array([r["estimate"] if np.isfinite(r["estimate"]) else 1.0 for r in moved])
     copies = np.array([r["copies_interp_mm"] or 1.0 for r in moved])
     measures = {
