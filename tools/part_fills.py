@@ -30,7 +30,9 @@ from tune_default import TEST_TAKES
 
 FILLS = ("auto", "knn", "rigid", "pattern")
 BLENDS = {"knn+regress": ("knn", "regress"), "knn+match": ("knn", "match"),
-          "regress+match": ("regress", "match"), "knn+regress+match": ("knn", "regress", "match")}
+          "regress+match": ("regress", "match"), "knn+regress+match": ("knn", "regress", "match"),
+          "auto+regress+match": ("auto", "regress", "match"),
+          "auto+auto+regress+match": ("auto", "auto", "regress", "match")}
 
 
 def run(out, takes=None):
