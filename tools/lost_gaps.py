@@ -172,21 +172,22 @@ def score(path):
             return min(1.0, predicted(r) / r["copies_interp_mm"] / c)
         return rule
 
-    def within_margin(longest):
-        # session 52: a departure d from the interpolation can lose a gap (error > 1.1 e + 2 mm,
-        # e the interpolation's) only where d > 0.1 e + 2 mm (triangle inequality): so d held to
-        # 0.1 x the copies' interpolation error + 2 mm loses none where the copies' error is no
-        # more than the gap's
+    def held(scale, plus=0.0, longest=np.inf):
+        """The departure held to ``scale`` x the copies' interpolation error + ``plus`` mm on
+        gaps of up to ``longest`` frames. Session 52: a departure d from the interpolation can
+        lose a gap (error > 1.1 e + 2 mm, e the interpolation's) only where d > 0.1 e + 2 mm
+        (triangle inequality), so at 0.1 and 2 mm it loses none where the copies' error is no
+        more than the gap's."""
         def rule(r):
             if r["l"] > longest or not r["copies_interp_mm"]:
                 return 1.0
-            return min(1.0, (0.1 * r["copies_interp_mm"] + 2) / max(r["departure_mm"], 1e-9))
+            return min(1.0, (scale * r["copies_interp_mm"] + plus)
+                       / max(r["departure_mm"], 1e-9))
         return rule
 
     rules = {"as is": lambda r: 1.0,
-             "departure <= copies' interp error": lambda r: 1.0 if not r["copies_interp_mm"]
-             else min(1.0, r["copies_interp_mm"] / max(r["departure_mm"], 1e-9)),
-             **{f"departure <= 0.1 copies' interp + 2 mm, l <= {n}": within_margin(n)
+             "departure <= copies' interp error": held(1.0),
+             **{f"departure <= 0.1 copies' interp + 2 mm, l <= {n}": held(0.1, 2.0, n)
                 for n in (60, 240)},
              **{f"calm gap, c = {c}": calm(c) for c in (0.5, 1, 2)},
              "calm gap, c = 2, estimate > 0.7": calm(2, narrow=True),

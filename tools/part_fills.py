@@ -18,8 +18,8 @@ from collections import defaultdict
 import numpy as np
 
 from lost_gaps import DAZ_TUNING
-from mocap_gapfill.core.evaluate import (complete_take, kb_without, punch_gaps, settings_of,
-                                         subject_of, with_gaps)
+from mocap_gapfill.core.evaluate import (complete_take, kb_without, punch_gaps, rmse_mm,
+                                         settings_of, subject_of, with_gaps)
 from mocap_gapfill.core.fill import fill
 from mocap_gapfill.core.io import read_motion
 from mocap_gapfill.core.kb import build_kb
@@ -54,8 +54,8 @@ def run(out, takes=None):
                 fills = {name: np.where(np.isnan(f), fills["knn"], f) for name, f in fills.items()}
                 fills.update({name: np.mean([fills[f] for f in parts], axis=0)
                               for name, parts in BLENDS.items()})
-                mm = {name: 1000 * float(np.sqrt(np.mean(np.sum(
-                    (f - truth.positions) ** 2, axis=2)[miss]))) for name, f in fills.items()}
+                mm = {name: rmse_mm(truth.replace(positions=f), truth, miss)
+                      for name, f in fills.items()}
                 sink.write(json.dumps({"take": take, "part": label, **mm}) + "\n")
                 print(take, label, f"auto {mm['auto']:.1f} mm", flush=True)
 
