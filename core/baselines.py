@@ -164,13 +164,15 @@ def _pair_stats(pos, p, seen):
     both = seen & seen[:, p:p + 1]
     count = both.sum(axis=0)
     offset = np.where(both[..., None], pos - pos[:, p:p + 1], 0.0)
-    dist = np.linalg.norm(offset, axis=2)
+    square = np.einsum("tnc,tnc->tn", offset, offset)
+    dist = np.sqrt(square)
     with np.errstate(invalid="ignore", divide="ignore"):
         mean_d = dist.sum(axis=0) / count
         dist_sd = np.sqrt(np.where(both, (dist - mean_d) ** 2, 0).sum(axis=0) / count)
         mean_o = offset.sum(axis=0) / count[:, None]
-        offset_var = (np.where(both[..., None], (offset - mean_o) ** 2, 0).sum(axis=(0, 2))
-                      / count)
+        # E|o|^2 - |E o|^2 (offsets of metres, variances of square millimetres and more)
+        offset_var = np.maximum(square.sum(axis=0) / count
+                                - (mean_o ** 2).sum(axis=1), 0.0)
     bad = count < 10
     bad[p] = True
     return (np.where(bad, np.inf, dist_sd), np.where(bad, np.inf, offset_var),
@@ -268,7 +270,8 @@ def steady_partners(partners, p, cache):
     order = order[np.argsort(np.maximum(spread[order], RIGID_TIE), kind="stable")]
     # a second copy of a donor adds nothing to its fit but a turn about the others
     if "same" not in cache:
-        cache["same"], cache["between"], cache["skeleton"] = _pair_table(partners)
+        cache["same"], cache["between"], cache["skeleton"] = _pair_table(partners,
+                                                                             cache=cache)
     kept = np.array([j for i, j in enumerate(order)
                      if not cache["same"][j, order[:i]].any()], dtype=int)
     mutual = _mutual(spread, kept, spread_of)
@@ -289,21 +292,23 @@ def same_points(pos, tolerance=0.001):
     return _pair_table(pos, tolerance)[0]
 
 
-def steady_pairs(pos, most=RIGID_TIE):
+def steady_pairs(pos, most=RIGID_TIE, cache=None):
     """The pairs of points (pairs x 2, ``i < j``) whose distance keeps within ``most`` (metres,
     SD) over 10 or more frames where both are seen, that distance (on the mean) and its SD:
     at :data:`RIGID_TIE`, a skeleton's bones and the joints on one segment, points of a rigid
     cluster the capture software solved; at a few millimetres, markers on one segment as well
     (skin slides); judged on at most 500 frames."""
-    mean, spread = _pair_spreads(pos)[:2]
+    mean, spread = _pair_spreads(pos, cache)[:2]
     first, second = np.nonzero(np.triu(spread <= most, 1))
     return np.stack([first, second], axis=1), mean[first, second], spread[first, second]
 
 
-def _pair_spreads(pos):
+def _pair_spreads(pos, cache=None):
     """On at most 500 frames: every pair's mean distance while both are seen (NaN where never),
     its SD (inf where fewer than 10 such frames, and for a point with itself), and which points
-    are seen there."""
+    are seen there. ``cache``: a dict kept between calls on the same ``pos``."""
+    if cache is not None and "pair spreads" in cache:
+        return cache["pair spreads"]
     sample = np.asarray(pos, dtype=np.float64)[::max(1, len(pos) // 500)]
     seen = np.isfinite(sample[..., 0])
     points = sample.shape[1]
@@ -316,17 +321,19 @@ def _pair_spreads(pos):
             spread[i] = np.where((seen & seen[:, i:i + 1]).sum(axis=0) >= 10,
                                  np.nanstd(distance, axis=0), np.inf)
     np.fill_diagonal(spread, np.inf)
+    if cache is not None:
+        cache["pair spreads"] = mean, spread, seen
     return mean, spread, seen
 
 
-def _pair_table(pos, tolerance=0.001):
+def _pair_table(pos, tolerance=0.001, cache=None):
     """On at most 500 frames: :func:`same_points`, every pair's mean distance while both are
     seen (NaN where never), and whether the take is a skeleton: every point seen keeps its
     distance to another (not its copy) within :data:`RIGID_TIE` over 10 frames or more, as a
     skeleton's joints do, each a bone's length from the next; no marker on soft tissue does
     (HDM05's head, thorax and pelvis markers are rigid to 0.04 mm among themselves, its limb
     markers are not)."""
-    mean, spread, seen = _pair_spreads(pos)
+    mean, spread, seen = _pair_spreads(pos, cache)
     exact = spread <= RIGID_TIE
     same = mean < tolerance
     np.fill_diagonal(same, False)
@@ -466,8 +473,10 @@ def _donors(ok, spread, mutual, donors, apart=None):
     other, other_costs = _steadiest(ok[loose], spread, known, donors)
     pairs = [known[places[loose, i], places[loose, j]] for i, j in ((0, 1), (0, 2), (1, 2))]
     worst = np.maximum.reduce([costs[loose].max(axis=1), *pairs])
-    better = (_turn_error(other, other_costs.max(axis=1), to_point, between)
-              < _turn_error(places[loose], worst, to_point, between))
+    # the same three in another order promise the same: rounding must not choose their costs
+    better = ((_turn_error(other, other_costs.max(axis=1), to_point, between)
+               < _turn_error(places[loose], worst, to_point, between))
+              & (np.sort(other, axis=1) != np.sort(places[loose], axis=1)).any(axis=1))
     places[loose[better]], costs[loose[better]] = other[better], other_costs[better]
     return places, costs
 

@@ -525,11 +525,11 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             windows=float(models * windows[p] * (1 - own[p])), own=float(models * own[p]),
             spline=float(spline_share), pattern=float(pattern_share + kb_share * by_partner[p]),
             estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
-    out = _with_distances_kept(motion, out, uncertainty, hold, report)
+    out = _with_distances_kept(motion, out, uncertainty, hold, report, partners)
     return _with_fill(motion, out), accounts
 
 
-def _with_distances_kept(motion, out, uncertainty, hold, report):
+def _with_distances_kept(motion, out, uncertainty, hold, report, partners):
     """The fill ``out`` with the take's missing samples moved onto the distances it keeps
     exactly (a skeleton) or towards those it keeps within :data:`AUTO_KEPT_SPREAD` (a marker
     set, each pair as far as its spread lets it; :func:`~.baselines.steady_pairs`,
@@ -537,13 +537,15 @@ def _with_distances_kept(motion, out, uncertainty, hold, report):
     (where unknown: the largest known, else 1 m^2; at least :data:`~.baselines.RIGID_TIE`
     squared); the samples of ``hold`` (a marker's short gaps) keep their place. The gaps'
     estimates stay those of the fill before: moved alike, the copies (more points hidden at
-    once) judged the move worse than it is on the gaps (docs/METHOD_NOTES.md, session 48)."""
+    once) judged the move worse than it is on the gaps (docs/METHOD_NOTES.md, session 48).
+    ``partners``: the rigid fill's statistics of the take (:func:`~.baselines.steady_partners`),
+    where its pairs' spreads may be kept already."""
     from .distances import keep_distances
 
     missing = motion.missing
     markers = motion.parents is None  # a skeleton's bones are exact; markers slide on the skin
     pairs, lengths, spreads = baselines.steady_pairs(
-        motion.positions, AUTO_KEPT_SPREAD if markers else baselines.RIGID_TIE)
+        motion.positions, AUTO_KEPT_SPREAD if markers else baselines.RIGID_TIE, partners)
     if not (missing[:, pairs[:, 0]] | missing[:, pairs[:, 1]]).any():
         return out
     known = np.isfinite(uncertainty) & missing
