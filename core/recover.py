@@ -164,8 +164,8 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
 
     ``masks`` are (missing, model, empty): the gaps, the points the model provides (the gaps
     widened by a frame), and the frames with too little present to model. ``cache`` keeps the
-    local models of the first pass; a second pass models again only the frames flagged in
-    ``cache["changed"]``.
+    local models and poses of the first pass; a second pass models and optimises again only the
+    frames flagged in ``cache["changed"]`` (the others keep the first pass's poses).
     """
     missing, model, empty = masks
     n = missing.shape[1]
@@ -196,7 +196,7 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
             index, obs_norm[sel], model[sel], settings, rng)
         progress(p0 + (p1 - p0) * 0.7 * (start + len(sel)) / max(1, len(todo)),
                  "searching and fitting local models")
-    shared = np.flatnonzero(source != np.arange(m))
+    shared = np.flatnonzero((source != np.arange(m)) & np.isin(source, todo))
     for array in (means, comps, lams, noise, spread):
         array[shared] = array[source[shared]]
     if "factor" not in cache:
@@ -204,8 +204,36 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
                                          np.random.default_rng([settings.random_state, 1]))
                            if settings.query_noise == "auto" else float(settings.query_noise))
     level = np.maximum(noise, cache["factor"] * spread)
-    problem = Problem(frames, obs_norm[frames], model[frames], means, comps, lams, level, root,
-                       angle, limbs, lengths, fps, settings, pos)
+    solve, world = np.arange(m), pos
+    if "pred" in cache:
+        # a second pass optimises the frames whose normalisation changed; the others keep the
+        # first pass's poses, which the smoothness term sees beside them
+        solve = np.flatnonzero(cache["changed"][frames])
+        kept = np.zeros(len(pos), bool)
+        kept[frames[~cache["changed"][frames]]] = True
+        world = np.where((model & kept[:, None])[..., None], cache["pred"], pos)
+    pred = cache["pred"].copy() if "pred" in cache else np.full_like(pos, np.nan)
+    if len(solve):
+        pred[frames[solve]] = _optimised(pos, frames[solve], obs_norm, model, root, angle,
+                                         (means[solve], comps[solve], lams[solve], level[solve]),
+                                         limbs, lengths, fps, settings, world, should_cancel)
+    cache["pred"] = pred.copy()
+    progress(p0 + (p1 - p0) * 0.95, "writing the fill")
+    if empty.any():
+        # too little present to model: predict from the model trajectory around those frames
+        trajectory = np.where(model[..., None], pred, pos)
+        trajectory[empty] = np.nan
+        pred[empty] = fill_linear(trajectory)[empty]
+    return blend_into_gaps(pos, pred, missing, model)
+
+
+def _optimised(pos, frames, obs_norm, model, root, angle, models, limbs, lengths, fps, settings,
+               world, should_cancel):
+    """The poses (world) of ``frames`` that minimise the energy, given their local ``models``
+    (means, components, eigenvalues, noise level); ``world``: the take as the smoothness term
+    sees it around them."""
+    problem = Problem(frames, obs_norm[frames], model[frames], *models, root, angle, limbs,
+                      lengths, fps, settings, world)
     h0 = problem.closed_form()
     if settings.max_iterations > 0 and (settings.w_s or settings.w_l):
         def fun(x):
@@ -218,16 +246,8 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
         h = result.x.reshape(h0.shape)
     else:
         h = h0
-    progress(p0 + (p1 - p0) * 0.95, "writing the fill")
-    pred_norm = problem.poses(h).reshape(m, n, 3)
-    pred = np.full_like(pos, np.nan)
-    pred[frames] = denormalize(pred_norm, root[frames], angle[frames])
-    if empty.any():
-        # too little present to model: predict from the model trajectory around those frames
-        trajectory = np.where(model[..., None], pred, pos)
-        trajectory[empty] = np.nan
-        pred[empty] = fill_linear(trajectory)[empty]
-    return blend_into_gaps(pos, pred, missing, model)
+    pred_norm = problem.poses(h).reshape(len(frames), -1, 3)
+    return denormalize(pred_norm, root[frames], angle[frames])
 
 
 def _clip_lengths(pos, limbs, kb_poses):
