@@ -40,8 +40,8 @@ from .models import KnnSettings, fit_models, kb_index, model_sources, noise_fact
 from .motion import blend_into_gaps, widened
 from .normalize import denormalize, frames_of, normalize, reference_points, reference_template
 
-#: a second pass models again the frames whose root moved more than this (m) or whose facing
-#: turned more than this (rad) once the hips are filled
+#: a second pass models and optimises again the frames whose root moved more than this (m) or
+#: whose facing turned more than this (rad) once the hips are filled
 CHANGE_ROOT = 0.01
 CHANGE_ANGLE = np.deg2rad(1.0)
 
@@ -140,7 +140,7 @@ def _fill_piece(motion, kb, settings, progress, should_cancel, report):
                             settings, progress, should_cancel, cache, 0.0, 0.6)
     if settings.renormalise and missing[:, reference_points(reference)].any():
         # the root or hips were in a gap: normalise again with their filled positions, and
-        # model again the frames whose normalisation changed
+        # model and optimise again the frames whose normalisation changed
         root2, angle2 = frames_of(filled_pos, reference, template)
         turn = np.abs(np.angle(np.exp(1j * (angle2 - angle))))  # unwrapped apart by 2 pi: same
         cache["changed"] = ((np.linalg.norm(root2 - root, axis=1) > CHANGE_ROOT)
