@@ -48,6 +48,9 @@ RIGID_TOGETHER = 0.005
 RIGID_TIE = 1e-4
 #: metres added (in quadrature) to the donors' spread when two rigid estimates are weighed
 SPREAD_FLOOR = 0.005
+#: donors in a line (a skeleton's chain) leave the turn about it free: the least turn is taken
+#: there, not the one the rounding picks (:func:`~.posing.best_rotation`)
+LEAN = 1e-9
 #: (gap, donor set) pairs times frames that the search for the gaps' nearest references looks at
 #: in one batch
 NEAREST_CHUNK = 1 << 20
@@ -415,7 +418,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
         ref = pos[ref_t[:, None], chosen[use]]  # (rows, donors, 3)
         c_ref = (ref * cw[use]).sum(axis=1)
         rot, _ = best_rotation((ref - c_ref[:, None]) * np.sqrt(cw[use]),
-                               (cur[use] - c_cur[use][:, None]) * np.sqrt(cw[use]))
+                               (cur[use] - c_cur[use][:, None]) * np.sqrt(cw[use]), lean=LEAN)
         moved = np.einsum("fij,fj->fi", rot, pos[ref_t, p] - c_ref) + c_cur[use]
         found[use] += weights[use, k][:, None] * moved
     estimate[rows] = found

@@ -60,13 +60,19 @@ def gram_schmidt(x, y):
     return np.stack([x, y, np.cross(x, y)], axis=-1)
 
 
-def best_rotation(a, b):
+def best_rotation(a, b, lean=0.0):
     """Rotations ``r`` minimising ``sum_i |r @ a[..., i, :] - b[..., i, :]|^2`` (Kabsch).
 
     ``a``, ``b``: shape (..., n, 3). Returns shape (..., 3, 3) and, per item, whether the fit is
     determined (False where the ``a`` vectors are collinear, leaving a free turn about them).
+    ``lean``: where the fit leaves a turn free, the rounding of the data chooses it; a small
+    ``lean`` (1e-9) adds that share of the identity (times the fit's scale) to the problem, so
+    the least turn is taken there and a determined fit moves by about that share of a radian.
     """
     cov = np.swapaxes(b, -1, -2) @ a
+    if lean:
+        scale = np.sqrt((cov ** 2).sum(axis=(-2, -1)))
+        cov = cov + lean * scale[..., None, None] * np.eye(3)
     u, s, vt = np.linalg.svd(cov)
     d = np.sign(np.linalg.det(u @ vt))
     fix = np.ones(s.shape)

@@ -120,7 +120,10 @@ def kernel_ridge(x, train, y, weight, ridge):
     squared = np.maximum(np.sum(x ** 2, axis=1)[:, None] + np.sum(xt ** 2, axis=1)[None]
                          - 2 * near, 0)
     inner = squared[train]
-    band = np.median(inner[inner > 0]) if (inner > 0).any() else 1.0
+    # between two training rows (a row against itself is 0 give or take the rounding)
+    apart = inner[~np.eye(len(xt), dtype=bool)]
+    apart = apart[apart > 0]
+    band = np.median(apart) if len(apart) else 1.0
     gram = near[train] + ridged + scale * np.exp(-inner / band)
     return (near + scale * np.exp(-squared / band)) @ np.linalg.solve(gram, y)
 

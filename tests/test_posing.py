@@ -57,6 +57,30 @@ def test_rotation_helpers():
     assert not ok[0]  # collinear: a free turn about the line
 
 
+
+def test_a_free_turn_is_the_least_not_the_roundings():
+    """Donors in a line (a skeleton's chain) leave the turn about it free, and the SVD filled it
+    with whatever the rounding gave: inputs moved by 1e-12 turned the fit 49-169 degrees here,
+    and the rigid fill of a joint's copies with it (ASF/AMC 07_05: `auto` 1.1 mm apart). With a
+    lean towards the identity the least turn is taken: the angle between the lines."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(0)
+    line = np.array([[0.0, 0, 0], [0.1, 0.02, 0.0], [0.25, 0.05, 0.0]])
+    line -= line.mean(axis=0)
+    there = line @ Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix().T
+
+    def turns(lean):
+        return np.stack([best_rotation((line * (1 + 1e-12 * rng.standard_normal(line.shape)))[None],
+                                       there[None], lean)[0][0] for _ in range(5)])
+
+    free, least = turns(0.0), turns(1e-9)
+    assert np.abs(free - free[0]).max() > 0.1  # the rounding's choice (when written: 1.7)
+    assert np.abs(least - least[0]).max() < 1e-6
+    assert np.allclose(line @ least[0].T, there, atol=1e-9)
+    angle = np.linalg.norm(Rotation.from_matrix(least[0]).as_rotvec())
+    assert np.isclose(angle, np.arccos(line[2] @ there[2] / (line[2] @ line[2])), atol=1e-6)
+
 def test_bone_gaps_and_points():
     parents = [-1, 0, 1, 1, 0]  # root, a, a's two children, b
     gaps = np.zeros((2, 5), bool)
