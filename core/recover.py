@@ -209,10 +209,8 @@ def _fill_pass(pos, masks, root, angle, index, limbs, lengths, fps, settings, pr
         # a second pass optimises the frames whose normalisation changed; the others keep the
         # first pass's poses, which the smoothness term sees beside them
         solve = np.flatnonzero(cache["changed"][frames])
-        kept = np.zeros(len(pos), bool)
-        kept[frames[~cache["changed"][frames]]] = True
-        world = np.where((model & kept[:, None])[..., None], cache["pred"], pos)
-    pred = cache["pred"].copy() if "pred" in cache else np.full_like(pos, np.nan)
+        world = np.where((model & ~cache["changed"][:, None])[..., None], cache["pred"], pos)
+    pred = cache.get("pred", np.full_like(pos, np.nan))
     if len(solve):
         pred[frames[solve]] = _optimised(pos, frames[solve], obs_norm, model, root, angle,
                                          (means[solve], comps[solve], lams[solve], level[solve]),

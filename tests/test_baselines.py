@@ -133,7 +133,6 @@ def test_rigid_donors_on_one_segment_do_not_hang_on_rounding(data_dir):
     assert moved < 1.0
 
 
-
 @pytest.mark.parametrize("name", ["02_05", "06_01"])
 def test_loose_marker_donors_do_not_hang_on_rounding(data_dir, name):
     """Where a marker's three donors chosen against it alone are loose, a rigid body of three is
@@ -157,6 +156,7 @@ def test_loose_marker_donors_do_not_hang_on_rounding(data_dir, name):
                            axis=2)[miss]
     print(1000 * moved.max())  # when written: 2e-8 and 4e-8 mm (7.5 and 1.2 before)
     assert moved.max() < 1e-6
+
 
 def test_rigid_donors_of_the_segment_before_a_joint_down_the_chain():
     """Donors alike in steadiness (baselines.RIGID_TIE) are taken those steady with the most of

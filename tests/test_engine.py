@@ -632,7 +632,6 @@ def test_auto_the_takes_own_regression_carries_an_arm_gone_for_seconds(daz_kb, w
     np.testing.assert_array_equal(regression.regress_points(gone, hands.names), gone)
 
 
-
 def test_the_takes_own_regression_does_not_hang_on_rounding(data_dir):
     """The Gaussian kernel's bandwidth is the median squared distance between training frames;
     a frame against itself is 0 give or take the rounding, and whether those entries counted
@@ -651,6 +650,7 @@ def test_the_takes_own_regression_does_not_hang_on_rounding(data_dir):
                            - regress_points(rounded, query.names), axis=2)[miss]
     print(1000 * np.nanmax(moved))  # when written: below 1e-6 mm (0.48 before)
     assert np.nanmax(moved) < 1e-6
+
 
 def test_a_markers_place_among_its_partners_regressed_beats_the_rigid_fill(data_dir):
     """Skin slides, and a marker near a joint does not keep its place among its rigid donors as
