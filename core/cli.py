@@ -394,9 +394,10 @@ def build_parser(extra=None):
     p = sub.add_parser("evaluate", help="accuracy of the methods on punched gaps in real data")
     p.add_argument("--protocol", required=True,
                    choices=["joints", "markers", "bodyparts", "shortgaps", "endgaps", "realgaps",
-                            "bones", "bone-ends"],
+                            "bursts", "bones", "bone-ends"],
                    help="shortgaps: dropouts of 3-24 frames; endgaps: points missing for "
-                        "the first or last 3-120 frames; "
+                        "the first or last 3-120 frames; bursts: 50-100 %% of the points "
+                        "gone together for 3-60 frames each second; "
                         "realgaps: the gaps of real captures (--gap-sources) on complete takes; "
                         "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
                         "rate; methods auto, knn, match, regress, interp, hermite, slerp, "

@@ -13,7 +13,11 @@ Protocols:
   last ``l`` (l in {3, 12, 30, 60, 120} at the evaluation frame rate);
 - ``realgaps``: the gaps a real capture has (``gap_sources``: takes with gaps of their own, e.g.
   CMU 01_01.c3d), transplanted by point name onto the complete test take, the source's mask
-  repeated in time where the test take is longer, so gap lengths and co-occurrence are real.
+  repeated in time where the test take is longer, so gap lengths and co-occurrence are real;
+- ``bursts``: occlusions that take most of the body at once (a subject half out of the volume,
+  a prop or another actor in the way, a dropped camera frame): in each 120-frame interval a
+  random ``l`` frames (l in {3, 12, 30, 60} at the evaluation frame rate) lose a random 50-100 %
+  of the points together, so a fill has few or no partners seen to carry them.
 
 The knowledge base is built from the sources without any file of the test trial's subject.
 Errors are RMSE in millimetres over the missing entries and over all entries (the paper's).
@@ -39,6 +43,10 @@ SHORT_GAPS = (3, 6, 12, 24)
 SHORT_GAPS_RATE = 0.05
 END_GAPS = (3, 12, 30, 60, 120)
 ENDGAPS_RATE = 0.15
+BURSTS = (3, 12, 30, 60)
+#: frames per burst interval, and the least and most share of the points a burst takes
+BURST_EVERY = 120
+BURST_SHARE = (0.5, 1.0)
 BODY_PARTS = ("left_arm", "right_arm", "left_leg", "right_leg", "upper_body", "lower_body",
               "left_side", "right_side")
 _ARM = re.compile(r"(arm|hand|wrist|elbow|shoulder|sho|collar|clavicle|humerus|radius|finger|"
@@ -117,6 +125,11 @@ def punch_gaps(n_frames, n_points, protocol, setting, rng, names=None):
         miss[n_frames - setting:, points[count:2 * count]] = True
     elif protocol == "realgaps":
         miss = real_gaps(setting, names, n_frames)
+    elif protocol == "bursts":
+        for s in range(0, n_frames - setting + 1, BURST_EVERY):
+            start = s + rng.integers(min(BURST_EVERY, n_frames - s) - setting + 1)
+            count = int(round(rng.uniform(*BURST_SHARE) * n_points))
+            miss[start:start + setting, rng.choice(n_points, count, replace=False)] = True
     else:
         raise GapFillError(f"unknown protocol {protocol!r}")
     return miss
@@ -149,6 +162,8 @@ def settings_of(protocol, gap_sources=()):
         return [(f"l={l}", l) for l in SHORT_GAPS]
     if protocol == "endgaps":
         return [(f"l={l}", l) for l in END_GAPS]
+    if protocol == "bursts":
+        return [(f"l={l}", l) for l in BURSTS]
     if protocol == "realgaps":
         if not gap_sources:
             raise GapFillError("protocol realgaps needs takes with real gaps (--gap-sources)")

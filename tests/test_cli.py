@@ -235,6 +235,27 @@ def test_evaluate_gaps_at_the_clip_ends(data_dir, tmp_path):
     assert rows["regress"]["rmse_missing_mm"] < 0.8 * rows["interp"]["rmse_missing_mm"]
 
 
+def test_evaluate_bursts_take_most_points_at_once(data_dir, tmp_path):
+    """Protocol `bursts`: once per 120 frames a run of l frames loses 50-100 % of the points
+    together (occlusions that take most of the body); on 06_01 without a knowledge base `auto`
+    fills them (a spline through the take joins where the partners left stray)."""
+    from mocap_gapfill.core.evaluate import punch_gaps
+
+    miss = punch_gaps(600, 40, "bursts", 30, np.random.default_rng(0))
+    frames = np.flatnonzero(miss.any(axis=1))
+    assert len(frames) == 5 * 30  # one run of 30 frames per interval
+    assert all(20 <= miss[t].sum() <= 40 for t in frames)
+    assert (miss[frames] == miss[frames[0]]).all(axis=1)[:30].all()
+    out = tmp_path / "bursts.json"
+    r = cli("evaluate", "--protocol", "bursts", "--settings", "l=30", "--methods", "auto",
+            "spline", "rigid", "--test", data_dir / "cmu/c3d/06_01.c3d", "--fps", "120",
+            "--no-kb", "--json", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    rows = {row["method"]: row["rmse_missing_mm"] for row in json.loads(out.read_text())["results"]}
+    print(rows)
+    assert rows["auto"] < min(rows["rigid"], 1.3 * rows["spline"])
+
+
 def test_evaluate_without_a_knowledge_base(data_dir, tmp_path):
     """`evaluate --no-kb`: what `auto` does on a rig or a marker set no knowledge base fits (the
     take alone), beside the methods that need one (scored inf, the run goes on); a knowledge
