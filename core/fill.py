@@ -402,7 +402,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     # partner's pattern's
     windows, own, by_partner = (np.zeros(motion.n_points) for _ in range(3))
     per_sample = np.full(motion.n_points, np.nan)  # the fill's squared error on its copies
-    eased = {}  # short gaps blended with a spline: the spline's share and the error expected
+    eased = {}  # gaps blended with a spline (and pattern): their shares and the error expected
     if probe.any():
         def on_copies_of(out):
             """Per point, the squared error summed over its copies (a method that left some
@@ -472,6 +472,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                f"more")
     # the rigid donors' squared spread at each frame and on the mean of each point's copies
     spreads = _squared_spreads(probe, spread, copies_spread)
+    harder = _harder_for_partners(*spreads)
     # the knowledge base's share per frame: on a marker set it follows the rigid donors' spread
     shares = np.broadcast_to(weight, missing.shape)
     if markers:
@@ -482,18 +483,26 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             knn_copies = _mix_in(_mix_in(_mix_in(knn_copies, matched, windows), regressed, own),
                                  patterned, by_partner)
         copies = _blend(knn_copies, on_copies, weight)
+        spline = baselines.fill_spline(motion.positions)
+        hidden_spline = baselines.fill_spline(np.where(probe[..., None], np.nan,
+                                                       motion.positions))
         with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
-        spline = baselines.fill_spline(motion.positions)
-        out = _with_spline_ends(motion, out, copies, probe, spline, weight == 0, report)
+        out, eased = _with_spline_joined(motion, out, copies, probe, spline, hidden_spline,
+                                         harder, shares, report)
+        out = _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, weight == 0,
+                                report)
 
         def rigid_of(hidden):
             return carried(motion.replace(positions=np.where(
                 hidden[..., None], np.nan, motion.positions)), hidden)[0]
 
-        out, eased = _with_spline(motion, out, spline, per_sample, weight == 0, rigid_of, report)
+        out, short = _with_spline(motion, out, spline, per_sample, weight == 0, rigid_of, report)
+        eased.update(short)
         out, at_ends = _with_pattern_ends(motion, out, per_sample, weight == 0, rigid_of, report)
         eased.update(at_ends)
+    out, holes = _with_holes_splined(motion, out, report)
+    eased.update({(p, a): (1.0, 0.0, float("nan")) for p, a in holes})
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
     if kb is not None:
@@ -504,7 +513,6 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     if lacking:
         report(_lacking_line(motion, out, lacking, kb is None))
     accounts = []
-    harder = _harder_for_partners(*spreads)
     uncertainty = np.zeros(missing.shape)  # each gap's squared error expected
     # a marker's short gaps, where the spline and a partner's pattern come closer than a few
     # millimetres of sliding skin, hold their place when the distances are kept
@@ -672,9 +680,55 @@ def _blend(kb, rigid, weight):
     return out
 
 
-def _with_spline_ends(motion, out, copies, probe, spline, rigid_alone, report):
+def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harder, shares,
+                        report):
+    """``out`` with each gap longer than :data:`AUTO_SPLINE_SECONDS` (both ends in the take)
+    joined by ``spline`` (a cubic spline of each point through the take) where that refilled the
+    point's longer copies (``probe``) better than the fill is expected to do on the gap, by
+    inverse errors (:func:`_joined`, :data:`AUTO_JOIN_RAMP`): the spline's error on them
+    (``hidden_spline``: the spline with the copies hidden) against the fill's (``copies``: its
+    estimate of them), the rigid part of that scaled by how far the rigid donors spread over
+    the gap against over the copies (``harder``, :func:`_harder_for_partners`; ``shares``: the
+    knowledge base's share per frame). Where most of the body is gone at once (a subject half
+    out of the volume, a prop in the way) the donors left are far from the point and the
+    knowledge base's models see few points: both stray by far more than the spline over a few
+    tenths of a second. Returns the fill and, per gap joined (``(point, first frame)``), the
+    spline's share, none of a pattern's and the blend's expected squared error per sample."""
+    shortest = _spline_frames(motion.fps)
+    longer = np.zeros_like(probe)
+    longest = np.zeros(probe.shape[1], dtype=int)
+    for p, a, b in gap_runs(probe):
+        longer[a:b + 1, p] = b - a + 1 > shortest
+        longest[p] = max(longest[p], b - a + 1)
+    with np.errstate(invalid="ignore", divide="ignore"):  # points without longer copies: nan
+        def per_sample(estimate):
+            error = np.sum((estimate - motion.positions) ** 2, axis=2)
+            return np.where(longer, error, 0.0).sum(axis=0) / longer.sum(axis=0)
+
+        e_fill, e_spline = per_sample(copies), per_sample(hidden_spline)
+    out, joined = out.copy(), {}
+    for p, a, b in gap_runs(motion.missing):
+        # copies shorter than the gap (a limb gone for half the take) do not show how a spline
+        # strays over it
+        if not (a > 0 and b < len(out) - 1 and shortest < b - a + 1 <= longest[p]
+                and np.isfinite(e_fill[p]) and np.isfinite(e_spline[p])):
+            continue
+        share, squared = _joined(np.array(e_fill[p] * harder(p, a, b, shares[a:b + 1, p].mean())),
+                                 np.array(e_spline[p]), AUTO_JOIN_RAMP)
+        if share > 0:
+            out[a:b + 1, p] = (1 - share) * out[a:b + 1, p] + share * spline[a:b + 1, p]
+            joined[p, a] = float(share), 0.0, float(squared)
+    if joined:
+        report(f"auto: a spline through the take joins {len(joined)} longer gaps where it "
+               f"refilled their copies better than the fill is expected to do there (a mean "
+               f"share of {np.mean([w for w, _, _ in joined.values()]):.0%})")
+    return out, joined
+
+
+def _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, rigid_alone, report):
     """``out`` with the frames of its gaps longer than :data:`AUTO_SPLINE_SECONDS` blended
-    towards ``spline`` (a cubic spline of each point through the take) near their ends.
+    towards ``spline`` (a cubic spline of each point through the take; ``hidden_spline``: the
+    same with the copies ``probe`` hidden) near their ends.
 
     Next to a gap's end a point carries on along a smooth curve: one frame in, the spline through
     the take misses by a millimetre or two, while the knowledge base's and the rigid estimates,
@@ -695,7 +749,6 @@ def _with_spline_ends(motion, out, copies, probe, spline, rigid_alone, report):
             if a > 0 and b < len(out) - 1 and b - a + 1 > shortest]
     if not gaps:  # e.g. a take of short dropouts only: no spline of the copies to make
         return out
-    hidden_spline = baselines.fill_spline(np.where(probe[..., None], np.nan, motion.positions))
     # per class of point and distance: spline-minus-estimate times error, its square, frames
     sums = np.zeros((3, 2, len(DISTANCES)))
     longest = np.zeros(motion.n_points, dtype=int)
@@ -886,6 +939,34 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
         report(f"auto: of {len(shares)} short gaps at the take's ends a partner's pattern "
                f"carries a quarter or more of {patterned}")
     return out, shares
+
+
+def _with_holes_splined(motion, out, report):
+    """``out`` with the short holes no estimate reached filled by a cubic spline through the
+    point's values (seen and filled): runs of up to :data:`AUTO_SPLINE_SECONDS` of a point's
+    missing frames where ``out`` has no value, with a value on both sides. There no knowledge
+    base models the point (none given, or it lacks the point) and fewer than three of its rigid
+    partners are seen: a dropped frame, where every marker is gone at once, whose neighbours
+    show where each one was. Runs at a clip's end or longer stay open (no estimate to go on).
+    Returns the fill and the gaps the spline filled alone (``(point, first frame)``)."""
+    missing = motion.missing
+    hole = missing & np.isnan(out[..., 0])
+    if not hole.any():
+        return out, []
+    frames, shortest = len(hole), _spline_frames(motion.fps)
+    short = np.zeros_like(hole)
+    for p, a, b in gap_runs(hole):
+        short[a:b + 1, p] = a > 0 and b < frames - 1 and b - a + 1 <= shortest
+    if not short.any():
+        return out, []
+    known = np.where(missing[..., None], out, motion.positions)
+    out = np.where(short[..., None], baselines.fill_spline(known), out)
+    alone = [(p, a) for p, a, b in gap_runs(missing) if short[a:b + 1, p].all()]
+    runs = len(gap_runs(short))
+    report(f"auto: {runs} short hole{'s' if runs > 1 else ''} no other estimate reached "
+           f"(fewer than three partners seen, no knowledge base's model) take a spline through "
+           f"the take: {int(short.sum())} samples of {int(short.any(axis=0).sum())} points")
+    return out, alone
 
 
 def _round_errors(rounds, truth, fill):
