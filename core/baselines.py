@@ -494,9 +494,10 @@ def _turn_error(places, worst, to_point, between):
     a, b, c = (between[places[:, i], places[:, j]] for i, j in ((0, 1), (1, 2), (0, 2)))
     half = (a + b + c) / 2
     area = np.sqrt(np.maximum(half * (half - a) * (half - b) * (half - c), 0.0))
-    with np.errstate(invalid="ignore"):  # 0 / 0 where the three places are one
+    # no triangle (the three places one, a pair never seen together): NaN, as said
+    with np.errstate(invalid="ignore"):
         height = 2 * area / np.maximum(np.maximum(a, b), c)
-    return worst * to_point[places].mean(axis=1) / np.maximum(height, 1e-6)
+        return worst * to_point[places].mean(axis=1) / np.maximum(height, 1e-6)
 
 
 def _steadiest(ok, spread, mutual, donors):

@@ -83,6 +83,11 @@ AUTO_JOIN_RAMP = 0.1
 #: theirs (tuned, docs/METHOD_NOTES.md: over longer gaps a spline's error has a tail that its
 #: copies do not foresee)
 AUTO_SPLINE_SECONDS = 0.2
+#: longer gaps take the spline where it refilled their copies better than the fill is expected
+#: to do on the gap (:func:`_with_spline_joined`), its error on the copies taken this many times
+#: over: that tail (chosen on the tuning takes, docs/METHOD_NOTES.md, session 54: as many
+#: gains, fewer losses than at 1)
+AUTO_SPLINE_TAIL = 2.0
 #: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
 #: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
 #: went astray on the tuning takes, where the partner's pattern carries them: docs/METHOD_NOTES.md,
@@ -304,12 +309,16 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     the windows only where they refill them better, and then the take's own regression of the
     point on the rest of the body (:func:`~.regression.regress_points`), by its error on the
     copies, and a partner's pattern where it refills them better still
-    (:data:`AUTO_PATTERN_FLOOR`). Longer gaps lean towards a spline through the take next to
-    their ends (:func:`_with_spline_ends`); short gaps (:data:`AUTO_SPLINE_SECONDS`) are last
-    blended with that spline and a partner's pattern by their errors on copies of each gap
-    (:func:`_with_spline`), those at a clip end with the pattern from the one end alone, by
-    errors on one-sided copies (:func:`_with_pattern_ends`). Last, the fill is moved onto the
-    distances the take keeps exactly, on a marker set towards those it keeps within a few
+    (:data:`AUTO_PATTERN_FLOOR`). A spline through the take joins longer gaps where it refilled
+    the point's copies better than the fill is expected to do on the gap
+    (:func:`_with_spline_joined`: most of the body gone at once leaves far partners and models
+    that see little), and they lean towards it next to their ends (:func:`_with_spline_ends`);
+    short gaps (:data:`AUTO_SPLINE_SECONDS`) are last blended with that spline and a partner's
+    pattern by their errors on copies of each gap (:func:`_with_spline`), those at a clip end
+    with the pattern from the one end alone, by errors on one-sided copies
+    (:func:`_with_pattern_ends`); holes no estimate reached (dropped frames without a knowledge
+    base) take the spline alone (:func:`_with_holes_splined`). Last, the fill is
+    moved onto the distances the take keeps exactly, on a marker set towards those it keeps within a few
     millimetres (:func:`_with_distances_kept`).
     """
     import threading
@@ -488,8 +497,11 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                                        motion.positions))
         with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
+        def harder_at(p, a, b):  # how much harder than its copies a gap is for the fill
+            return harder(p, a, b, float(shares[a:b + 1, p].mean()))
+
         out, eased = _with_spline_joined(motion, out, copies, probe, spline, hidden_spline,
-                                         harder, shares, report)
+                                         harder_at, report)
         out = _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, weight == 0,
                                 report)
 
@@ -680,19 +692,19 @@ def _blend(kb, rigid, weight):
     return out
 
 
-def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harder, shares,
-                        report):
+def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harder, report):
     """``out`` with each gap longer than :data:`AUTO_SPLINE_SECONDS` (both ends in the take)
     joined by ``spline`` (a cubic spline of each point through the take) where that refilled the
     point's longer copies (``probe``) better than the fill is expected to do on the gap, by
     inverse errors (:func:`_joined`, :data:`AUTO_JOIN_RAMP`): the spline's error on them
     (``hidden_spline``: the spline with the copies hidden) against the fill's (``copies``: its
-    estimate of them), the rigid part of that scaled by how far the rigid donors spread over
-    the gap against over the copies (``harder``, :func:`_harder_for_partners`; ``shares``: the
-    knowledge base's share per frame). Where most of the body is gone at once (a subject half
-    out of the volume, a prop in the way) the donors left are far from the point and the
-    knowledge base's models see few points: both stray by far more than the spline over a few
-    tenths of a second. Returns the fill and, per gap joined (``(point, first frame)``), the
+    estimate of them; infinite where it left some open), the rigid part of that scaled by how
+    far the rigid donors spread over the gap against over the copies (``harder(p, a, b)``,
+    :func:`_harder_for_partners`), the spline's by :data:`AUTO_SPLINE_TAIL` (over longer gaps
+    its error has a tail that its copies do not foresee). Where most of the body is gone at
+    once (a subject half out of the volume, a prop in the way) the donors left are far from the
+    point and the knowledge base's models see few points: both stray by far more than the
+    spline over a few tenths of a second. Returns the fill and, per gap joined (``(point, first frame)``), the
     spline's share, none of a pattern's and the blend's expected squared error per sample."""
     shortest = _spline_frames(motion.fps)
     longer = np.zeros_like(probe)
@@ -706,17 +718,20 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
             return np.where(longer, error, 0.0).sum(axis=0) / longer.sum(axis=0)
 
         e_fill, e_spline = per_sample(copies), per_sample(hidden_spline)
+    # a fill that left some of its copies open is no rival to the spline
+    e_fill[np.isnan(e_fill) & longer.any(axis=0)] = np.inf
     out, joined = out.copy(), {}
     for p, a, b in gap_runs(motion.missing):
         # copies shorter than the gap (a limb gone for half the take) do not show how a spline
         # strays over it
         if not (a > 0 and b < len(out) - 1 and shortest < b - a + 1 <= longest[p]
-                and np.isfinite(e_fill[p]) and np.isfinite(e_spline[p])):
+                and not np.isnan(e_fill[p]) and np.isfinite(e_spline[p])):
             continue
-        share, squared = _joined(np.array(e_fill[p] * harder(p, a, b, shares[a:b + 1, p].mean())),
-                                 np.array(e_spline[p]), AUTO_JOIN_RAMP)
-        if share > 0:
-            out[a:b + 1, p] = (1 - share) * out[a:b + 1, p] + share * spline[a:b + 1, p]
+        share, squared = _joined(np.array(e_fill[p] * harder(p, a, b)),
+                                 np.array(e_spline[p] * AUTO_SPLINE_TAIL), AUTO_JOIN_RAMP)
+        if share > 0:  # where the fill has no value the spline alone
+            here, there = out[a:b + 1, p], spline[a:b + 1, p]
+            out[a:b + 1, p] = np.where(np.isnan(here), there, (1 - share) * here + share * there)
             joined[p, a] = float(share), 0.0, float(squared)
     if joined:
         report(f"auto: a spline through the take joins {len(joined)} longer gaps where it "
@@ -801,14 +816,14 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     (:func:`~.baselines.fill_spline`) and its pattern fill (:func:`~.baselines.fill_pattern`, at
     :data:`AUTO_PATTERN_WEIGHT`) by inverse errors per sample: the spline's and the pattern's on up
     to :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
-    frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; not finite
-    where it has none) or, where ``rigid_alone`` says the rigid estimate fills the point alone, that
+    frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; NaN
+    where it has none, infinite where ``out`` left some of them open) or, where ``rigid_alone`` says the rigid estimate fills the point alone, that
     estimate's (``rigid_of(hidden)``: it on the samples ``hidden`` with those hidden) on the
     spline's copies; ``spline`` is that spline of the take. Over a few frames a point moves along a
     smooth curve that the spline follows within a millimetre, closer than any estimate carried from
     other points; over longer gaps its error grows fast, with a tail its copies do not foresee, so
     only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline
-    across them: :func:`_with_pattern_ends`) and points without a finite ``e_out`` keep ``out``;
+    across them: :func:`_with_pattern_ends`) and points without copies keep ``out``;
     the pattern joins only where a partner spans the gap and each of its copies. Returns the
     blend and, per gap blended (``(point, first frame)``), the spline's and the pattern's shares
     and the blend's expected squared error (the errors as if independent)."""
@@ -819,7 +834,7 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     # never overlap, and all lie within AUTO_SPLINE_REACH gap lengths of their gap
     rounds, copies = np.zeros((AUTO_SPLINE_COPIES,) + missing.shape, bool), []
     for p, a, b in gap_runs(missing):
-        if (a == 0 or b == len(missing) - 1 or not np.isfinite(e_out[p])
+        if (a == 0 or b == len(missing) - 1 or np.isnan(e_out[p])
                 or b - a + 1 > _spline_frames(motion.fps)):
             continue
         length, own, starts = b - a + 1, missing[:, p].copy(), []
@@ -942,30 +957,28 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
 
 
 def _with_holes_splined(motion, out, report):
-    """``out`` with the short holes no estimate reached filled by a cubic spline through the
-    point's values (seen and filled): runs of up to :data:`AUTO_SPLINE_SECONDS` of a point's
-    missing frames where ``out`` has no value, with a value on both sides. There no knowledge
-    base models the point (none given, or it lacks the point) and fewer than three of its rigid
-    partners are seen: a dropped frame, where every marker is gone at once, whose neighbours
-    show where each one was. Runs at a clip's end or longer stay open (no estimate to go on).
-    Returns the fill and the gaps the spline filled alone (``(point, first frame)``)."""
+    """``out`` with the holes no estimate reached filled by a cubic spline through the point's
+    values (seen and filled): runs of a point's missing frames where ``out`` has no value, with
+    a value on both sides. There no knowledge base models the point (none given, or it lacks
+    the point) and fewer than three of its rigid partners are seen: frames where every marker
+    is gone at once (a dropped camera frame, the subject out of the volume), whose neighbours
+    show where each one was. Runs at a clip's end stay open (nothing on the far side). Returns
+    the fill and the gaps the spline filled alone (``(point, first frame)``)."""
     missing = motion.missing
     hole = missing & np.isnan(out[..., 0])
-    if not hole.any():
-        return out, []
-    frames, shortest = len(hole), _spline_frames(motion.fps)
-    short = np.zeros_like(hole)
+    inside = np.zeros_like(hole)
     for p, a, b in gap_runs(hole):
-        short[a:b + 1, p] = a > 0 and b < frames - 1 and b - a + 1 <= shortest
-    if not short.any():
+        inside[a:b + 1, p] = a > 0 and b < len(hole) - 1
+    if not inside.any():
         return out, []
     known = np.where(missing[..., None], out, motion.positions)
-    out = np.where(short[..., None], baselines.fill_spline(known), out)
-    alone = [(p, a) for p, a, b in gap_runs(missing) if short[a:b + 1, p].all()]
-    runs = len(gap_runs(short))
-    report(f"auto: {runs} short hole{'s' if runs > 1 else ''} no other estimate reached "
+    out = np.where(inside[..., None], baselines.fill_spline(known), out)
+    alone = [(p, a) for p, a, b in gap_runs(missing) if inside[a:b + 1, p].all()]
+    runs = gap_runs(inside)
+    report(f"auto: {len(runs)} hole{'s' if len(runs) > 1 else ''} no other estimate reached "
            f"(fewer than three partners seen, no knowledge base's model) take a spline through "
-           f"the take: {int(short.sum())} samples of {int(short.any(axis=0).sum())} points")
+           f"the take: {int(inside.sum())} samples of {int(inside.any(axis=0).sum())} points, "
+           f"the longest {max(b - a + 1 for _, a, b in runs)} frames")
     return out, alone
 
 
@@ -985,7 +998,7 @@ def _weigh_in(out, p, a, b, others, errors, weights):
     errors = np.asarray(errors)
     w = np.asarray(weights) / (errors + 1e-24)
     w /= w.sum()
-    blend = w[0] * out[a:b + 1, p]
+    blend = w[0] * out[a:b + 1, p] if w[0] else 0.0
     for share, other in zip(w[1:], others):
         if share:
             blend = blend + share * other[a:b + 1, p]

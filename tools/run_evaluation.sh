@@ -74,6 +74,16 @@ $MG evaluate --protocol endgaps --quiet --skip-frames 6 --kb-sources "$DAZ" \
   --methods auto knn rigid pattern local-spline spline linear \
   --test "${BVH43[@]}" \
   --json docs/results/endgaps_bvh43.json
+# occlusions that take most of the body at once (50-100 % of the points for 3-60 frames each
+# second) on 85_02, on the HDM05 subjects (each against a KB of the other two), and without a KB
+$MG evaluate --protocol bursts --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
+  --methods auto knn rigid pattern local-spline spline linear \
+  --test "$D/cmu/c3d/85_02.c3d" --json docs/results/bursts_cmu_kb.json
+$MG evaluate --protocol bursts --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
+  --methods auto rigid pattern local-spline spline linear \
+  --test "${HDM05[@]}" --json docs/results/bursts_hdm05_subjects.json
+$MG evaluate --protocol bursts --quiet --fps 120 --no-kb --methods auto rigid pattern spline \
+  --test "$D/cmu/c3d/85_02.c3d" "${HDM05[@]}" --json docs/results/bursts_no_kb.json
 # the same gaps without a knowledge base (a rig no starter one fits): auto from the take alone
 $MG evaluate --protocol bones --quiet --skip-frames 6 --no-kb --methods interp auto \
   --test "${BVH43[@]}" \
