@@ -317,8 +317,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     pattern by their errors on copies of each gap (:func:`_with_spline`), those at a clip end
     with the pattern from the one end alone, by errors on one-sided copies
     (:func:`_with_pattern_ends`); holes no estimate reached (dropped frames without a knowledge
-    base) take the spline alone (:func:`_with_holes_splined`). Last, the fill is
-    moved onto the distances the take keeps exactly, on a marker set towards those it keeps within a few
+    base) take the spline alone (:func:`_with_holes_splined`). Last, the fill is moved onto
+    the distances the take keeps exactly, on a marker set towards those it keeps within a few
     millimetres (:func:`_with_distances_kept`).
     """
     import threading
@@ -704,8 +704,9 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     its error has a tail that its copies do not foresee). Where most of the body is gone at
     once (a subject half out of the volume, a prop in the way) the donors left are far from the
     point and the knowledge base's models see few points: both stray by far more than the
-    spline over a few tenths of a second. Returns the fill and, per gap joined (``(point, first frame)``), the
-    spline's share, none of a pattern's and the blend's expected squared error per sample."""
+    spline over a few tenths of a second. Returns the fill and, per gap joined (``(point,
+    first frame)``), the spline's share, none of a pattern's and the blend's expected squared
+    error per sample."""
     shortest = _spline_frames(motion.fps)
     longer = np.zeros_like(probe)
     longest = np.zeros(probe.shape[1], dtype=int)
@@ -817,9 +818,10 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     :data:`AUTO_PATTERN_WEIGHT`) by inverse errors per sample: the spline's and the pattern's on up
     to :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
     frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; NaN
-    where it has none, infinite where ``out`` left some of them open) or, where ``rigid_alone`` says the rigid estimate fills the point alone, that
-    estimate's (``rigid_of(hidden)``: it on the samples ``hidden`` with those hidden) on the
-    spline's copies; ``spline`` is that spline of the take. Over a few frames a point moves along a
+    where it has none, infinite where ``out`` left some of them open) or, where
+    ``rigid_alone`` says the rigid estimate fills the point alone, that estimate's
+    (``rigid_of(hidden)``: it on the samples ``hidden`` with those hidden) on the spline's
+    copies; ``spline`` is that spline of the take. Over a few frames a point moves along a
     smooth curve that the spline follows within a millimetre, closer than any estimate carried from
     other points; over longer gaps its error grows fast, with a tail its copies do not foresee, so
     only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline
