@@ -397,7 +397,7 @@ def build_parser(extra=None):
                             "bursts", "bones", "bone-ends"],
                    help="shortgaps: dropouts of 3-24 frames; endgaps: points missing for "
                         "the first or last 3-120 frames; bursts: 50-100 %% of the points "
-                        "gone together for 3-60 frames each second; "
+                        "gone together for 3-60 frames per 120; "
                         "realgaps: the gaps of real captures (--gap-sources) on complete takes; "
                         "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
                         "rate; methods auto, knn, match, regress, interp, hermite, slerp, "
