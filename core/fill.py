@@ -493,8 +493,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                  patterned, by_partner)
         copies = _blend(knn_copies, on_copies, weight)
         spline = baselines.fill_spline(motion.positions)
-        hidden_spline = baselines.fill_spline(np.where(probe[..., None], np.nan,
-                                                       motion.positions))
+        # the spline with the copies hidden, for the longer gaps (none: a take of short dropouts)
+        hidden_spline = (baselines.fill_spline(np.where(probe[..., None], np.nan,
+                                                        motion.positions))
+                         if _longer_gaps(missing, motion.fps) else None)
         with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
         def harder_at(p, a, b):  # how much harder than its copies a gap is for the fill
@@ -692,6 +694,15 @@ def _blend(kb, rigid, weight):
     return out
 
 
+def _longer_gaps(missing, fps):
+    """The gaps ``(point, first, last)`` longer than :data:`AUTO_SPLINE_SECONDS` with both ends in
+    the take: those a spline through the take joins (:func:`_with_spline_joined`) and leans
+    them towards near their ends (:func:`_with_spline_ends`)."""
+    shortest = _spline_frames(fps)
+    return [(p, a, b) for p, a, b in gap_runs(missing)
+            if a > 0 and b < len(missing) - 1 and b - a + 1 > shortest]
+
+
 def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harder, report):
     """``out`` with each gap longer than :data:`AUTO_SPLINE_SECONDS` (both ends in the take)
     joined by ``spline`` (a cubic spline of each point through the take) where that refilled the
@@ -707,6 +718,9 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     spline over a few tenths of a second. Returns the fill and, per gap joined (``(point,
     first frame)``), the spline's share, none of a pattern's and the blend's expected squared
     error per sample."""
+    gaps = _longer_gaps(motion.missing, motion.fps)
+    if not gaps:
+        return out, {}
     shortest = _spline_frames(motion.fps)
     longer = np.zeros_like(probe)
     longest = np.zeros(probe.shape[1], dtype=int)
@@ -722,11 +736,11 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     # a fill that left some of its copies open is no rival to the spline
     e_fill[np.isnan(e_fill) & longer.any(axis=0)] = np.inf
     out, joined = out.copy(), {}
-    for p, a, b in gap_runs(motion.missing):
+    for p, a, b in gaps:
         # copies shorter than the gap (a limb gone for half the take) do not show how a spline
         # strays over it
-        if not (a > 0 and b < len(out) - 1 and shortest < b - a + 1 <= longest[p]
-                and not np.isnan(e_fill[p]) and np.isfinite(e_spline[p])):
+        if not (b - a + 1 <= longest[p] and not np.isnan(e_fill[p])
+                and np.isfinite(e_spline[p])):
             continue
         share, squared = _joined(np.array(e_fill[p] * harder(p, a, b)),
                                  np.array(e_spline[p] * AUTO_SPLINE_TAIL), AUTO_JOIN_RAMP)
@@ -761,8 +775,7 @@ def _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, rigid_a
     from .stacking import DISTANCES, classes
 
     shortest = _spline_frames(motion.fps)
-    gaps = [(p, a, b) for p, a, b in gap_runs(motion.missing)
-            if a > 0 and b < len(out) - 1 and b - a + 1 > shortest]
+    gaps = _longer_gaps(motion.missing, motion.fps)
     if not gaps:  # e.g. a take of short dropouts only: no spline of the copies to make
         return out
     # per class of point and distance: spline-minus-estimate times error, its square, frames

@@ -74,8 +74,8 @@ $MG evaluate --protocol endgaps --quiet --skip-frames 6 --kb-sources "$DAZ" \
   --methods auto knn rigid pattern local-spline spline linear \
   --test "${BVH43[@]}" \
   --json docs/results/endgaps_bvh43.json
-# occlusions that take most of the body at once (50-100 % of the points for 3-60 frames each
-# second) on 85_02, on the HDM05 subjects (each against a KB of the other two), and without a KB
+# occlusions that take most of the body at once (50-100 % of the points for 3-60 frames per 120
+# frames) on 85_02, on the HDM05 subjects (each against a KB of the other two), and without a KB
 $MG evaluate --protocol bursts --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
   --methods auto knn rigid pattern local-spline spline linear \
   --test "$D/cmu/c3d/85_02.c3d" --json docs/results/bursts_cmu_kb.json
