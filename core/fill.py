@@ -88,6 +88,13 @@ AUTO_SPLINE_SECONDS = 0.2
 #: over: that tail (chosen on the tuning takes, docs/METHOD_NOTES.md, session 54: as many
 #: gains, fewer losses than at 1)
 AUTO_SPLINE_TAIL = 2.0
+#: where more than this share of the points is gone on the mean over a gap, an estimate of it
+#: is taken to be off by at least its RMS distance from the spline through the take less
+#: ``AUTO_OFF_SPLINE`` times the spline's expected RMS error, whatever its copies said
+#: (:func:`_off_the_spline`; chosen on the tuning takes, docs/METHOD_NOTES.md, session 55: 0.3
+#: and 0.7 gave the same; at 1 time the spline's error the gains were the same, the losses larger)
+AUTO_BODY_GONE = 0.5
+AUTO_OFF_SPLINE = 2.0
 #: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
 #: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
 #: went astray on the tuning takes, where the partner's pattern carries them: docs/METHOD_NOTES.md,
@@ -735,6 +742,7 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
         e_fill, e_spline = per_sample(copies), per_sample(hidden_spline)
     # a fill that left some of its copies open is no rival to the spline
     e_fill[np.isnan(e_fill) & longer.any(axis=0)] = np.inf
+    gone = motion.missing.mean(axis=1)
     out, joined = out.copy(), {}
     for p, a, b in gaps:
         # copies shorter than the gap (a limb gone for half the take) do not show how a spline
@@ -742,8 +750,10 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
         if not (b - a + 1 <= longest[p] and not np.isnan(e_fill[p])
                 and np.isfinite(e_spline[p])):
             continue
-        share, squared = _joined(np.array(e_fill[p] * harder(p, a, b)),
-                                 np.array(e_spline[p] * AUTO_SPLINE_TAIL), AUTO_JOIN_RAMP)
+        e_other = e_spline[p] * AUTO_SPLINE_TAIL
+        e_here = _off_the_spline(out, spline, gone, p, a, b, e_fill[p] * harder(p, a, b),
+                                 e_other)
+        share, squared = _joined(np.array(e_here), np.array(e_other), AUTO_JOIN_RAMP)
         if share > 0:  # where the fill has no value the spline alone
             here, there = out[a:b + 1, p], spline[a:b + 1, p]
             out[a:b + 1, p] = np.where(np.isnan(here), there, (1 - share) * here + share * there)
@@ -878,6 +888,7 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     # where the rigid estimate alone fills a point, it is scored on the spline's own copies
     if rigid_alone[[p for p, _, _, _ in copies]].any():
         rigid_error = _round_errors(rounds, motion.positions, rigid_of)
+    gone = missing.mean(axis=1)
     out, shares = out.copy(), {}
     for p, a, b, starts in copies:
         def on_copies(error):
@@ -889,6 +900,8 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
             e_here = e_rigid if np.isfinite(e_rigid) else e_here
         if not (np.isfinite(e_pattern) and np.isfinite(pattern[a:b + 1, p]).all()):
             e_pattern = np.inf  # no donor spans the gap or one of its copies
+        e_here = _off_the_spline(out, spline, gone, p, a, b, e_here, e_spline)
+        e_pattern = _off_the_spline(pattern, spline, gone, p, a, b, e_pattern, e_spline)
         w, squared = _weigh_in(out, p, a, b, (spline, pattern), (e_here, e_spline, e_pattern),
                                (1.0, 1.0, AUTO_PATTERN_WEIGHT))
         shares[p, a] = w[1], w[2], squared
@@ -899,6 +912,25 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
                f"more than the other estimates, a partner's pattern a quarter or more of "
                f"{patterned}")
     return out, shares
+
+
+def _off_the_spline(estimate, spline, gone, p, a, b, e_estimate, e_spline):
+    """``estimate``'s expected squared error per sample on the gap ``a``-``b`` of point ``p``
+    (``e_estimate``, from copies), raised where more than :data:`AUTO_BODY_GONE` of the points
+    are gone on the mean over the gap (``gone``: the share missing per frame) to at least the
+    square of its RMS distance from ``spline`` less :data:`AUTO_OFF_SPLINE` times the spline's
+    own expected RMS error (``e_spline``: squared, per sample): by the triangle inequality it is
+    off by about that much, whatever its copies said. With most of the body gone the partners
+    left are far and the knowledge base's models see little, so copies taken where more was
+    seen vouch for it less than for the spline, which needs nothing but the point's own track
+    (on bursts of the tuning takes the fill strayed 4-9 times further than its copies
+    foretold)."""
+    squared = np.sum((estimate[a:b + 1, p] - spline[a:b + 1, p]) ** 2, axis=1)
+    known = np.isfinite(squared)
+    if not (np.isfinite(e_estimate) and known.any() and gone[a:b + 1].mean() > AUTO_BODY_GONE):
+        return e_estimate
+    apart = np.sqrt(squared[known].mean())
+    return max(e_estimate, max(apart - AUTO_OFF_SPLINE * np.sqrt(e_spline), 0.0) ** 2)
 
 
 def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
