@@ -925,9 +925,11 @@ def _off_the_spline(estimate, spline, gone, p, a, b, e_estimate, e_spline):
     seen vouch for it less than for the spline, which needs nothing but the point's own track
     (on bursts of the tuning takes the fill strayed 4-9 times further than its copies
     foretold)."""
+    if not (np.isfinite(e_estimate) and gone[a:b + 1].mean() > AUTO_BODY_GONE):
+        return e_estimate
     squared = np.sum((estimate[a:b + 1, p] - spline[a:b + 1, p]) ** 2, axis=1)
     known = np.isfinite(squared)
-    if not (np.isfinite(e_estimate) and known.any() and gone[a:b + 1].mean() > AUTO_BODY_GONE):
+    if not known.any():
         return e_estimate
     apart = np.sqrt(squared[known].mean())
     return max(e_estimate, max(apart - AUTO_OFF_SPLINE * np.sqrt(e_spline), 0.0) ** 2)
