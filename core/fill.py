@@ -141,8 +141,10 @@ class GapAccount:
     alone.
     ``estimate``: the fill's RMS error in metres on copies of the point's gaps (the point hidden
     where it is observed, refilled as the gaps were), its rigid part scaled to how far the rigid
-    donors spread over this gap (:func:`_harder_for_partners`): what ``auto`` expects here, not
-    a measurement of the gap; NaN where the point had no copies."""
+    donors spread over this gap (:func:`_harder_for_partners`), and where most of the body is
+    gone raised to how far the fill strays from a spline through the take
+    (:func:`_off_the_spline`): what ``auto`` expects here, not a measurement of the gap; NaN
+    where the point had no copies."""
 
     point: str
     first: int

@@ -912,12 +912,12 @@ def test_auto_lets_a_spline_join_gaps_where_most_of_the_body_is_gone(data_dir, m
 
 def test_auto_doubts_a_fill_that_strays_from_the_spline_where_most_of_the_body_is_gone(
         data_dir, monkeypatch):
-    """01_01's first 1,800 complete frames (subject out of the KB) with bursts of 30 frames at 120 fps,
-    50-100 % of the markers gone at once: on a few bursts the fill strays by tens of millimetres
-    while its copies (5 per marker, where more of the body was seen) promised ten. Where more
-    than half of the points are gone, an estimate that lies further from the spline than the
-    spline is expected to err is off by at least the difference (triangle inequality), whatever
-    its copies said; the spline then takes the gap. Where few points are gone (the `markers`
+    """01_01's first 1,800 complete frames (subject out of the KB) with bursts of 30 frames at
+    120 fps, 50-100 % of the markers gone at once: on a few bursts the fill strays by tens of
+    millimetres while its copies (5 per marker, where more of the body was seen) promised about
+    ten. Where more than half of the points are gone, an estimate that lies further from the
+    spline than twice the spline's expected error is off by at least the difference (triangle
+    inequality), whatever its copies said; the spline then takes the gap. Where few points are gone (the `markers`
     protocol at 10 %) nothing changes. Measured when written (mm): bursts auto 18.1, without the
     bound 29.9, spline 14.6; markers at 10 % auto 6.7 either way (spline 101.3)."""
     from mocap_gapfill.core import fill as fill_module
