@@ -744,7 +744,6 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
         e_fill, e_spline = per_sample(copies), per_sample(hidden_spline)
     # a fill that left some of its copies open is no rival to the spline
     e_fill[np.isnan(e_fill) & longer.any(axis=0)] = np.inf
-    gone = motion.missing.mean(axis=1)
     out, joined = out.copy(), {}
     for p, a, b in gaps:
         # copies shorter than the gap (a limb gone for half the take) do not show how a spline
@@ -753,8 +752,8 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
                 and np.isfinite(e_spline[p])):
             continue
         e_other = e_spline[p] * AUTO_SPLINE_TAIL
-        e_here = _off_the_spline(out, spline, gone, p, a, b, e_fill[p] * harder(p, a, b),
-                                 e_other)
+        e_here = _off_the_spline(out, spline, motion.missing, p, a, b,
+                                 e_fill[p] * harder(p, a, b), e_other)
         share, squared = _joined(np.array(e_here), np.array(e_other), AUTO_JOIN_RAMP)
         if share > 0:  # where the fill has no value the spline alone
             here, there = out[a:b + 1, p], spline[a:b + 1, p]
@@ -890,7 +889,6 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     # where the rigid estimate alone fills a point, it is scored on the spline's own copies
     if rigid_alone[[p for p, _, _, _ in copies]].any():
         rigid_error = _round_errors(rounds, motion.positions, rigid_of)
-    gone = missing.mean(axis=1)
     out, shares = out.copy(), {}
     for p, a, b, starts in copies:
         def on_copies(error):
@@ -902,8 +900,8 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
             e_here = e_rigid if np.isfinite(e_rigid) else e_here
         if not (np.isfinite(e_pattern) and np.isfinite(pattern[a:b + 1, p]).all()):
             e_pattern = np.inf  # no donor spans the gap or one of its copies
-        e_here = _off_the_spline(out, spline, gone, p, a, b, e_here, e_spline)
-        e_pattern = _off_the_spline(pattern, spline, gone, p, a, b, e_pattern, e_spline)
+        e_here = _off_the_spline(out, spline, missing, p, a, b, e_here, e_spline)
+        e_pattern = _off_the_spline(pattern, spline, missing, p, a, b, e_pattern, e_spline)
         w, squared = _weigh_in(out, p, a, b, (spline, pattern), (e_here, e_spline, e_pattern),
                                (1.0, 1.0, AUTO_PATTERN_WEIGHT))
         shares[p, a] = w[1], w[2], squared
@@ -916,10 +914,10 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     return out, shares
 
 
-def _off_the_spline(estimate, spline, gone, p, a, b, e_estimate, e_spline):
+def _off_the_spline(estimate, spline, missing, p, a, b, e_estimate, e_spline):
     """``estimate``'s expected squared error per sample on the gap ``a``-``b`` of point ``p``
     (``e_estimate``, from copies), raised where more than :data:`AUTO_BODY_GONE` of the points
-    are gone on the mean over the gap (``gone``: the share missing per frame) to at least the
+    are gone on the mean over the gap (``missing``: the take's) to at least the
     square of its RMS distance from ``spline`` less :data:`AUTO_OFF_SPLINE` times the spline's
     own expected RMS error (``e_spline``: squared, per sample): by the triangle inequality it is
     off by about that much, whatever its copies said. With most of the body gone the partners
@@ -927,7 +925,7 @@ def _off_the_spline(estimate, spline, gone, p, a, b, e_estimate, e_spline):
     seen vouch for it less than for the spline, which needs nothing but the point's own track
     (on bursts of the tuning takes the fill strayed 4-9 times further than its copies
     foretold)."""
-    if not (np.isfinite(e_estimate) and gone[a:b + 1].mean() > AUTO_BODY_GONE):
+    if not (np.isfinite(e_estimate) and missing[a:b + 1].mean() > AUTO_BODY_GONE):
         return e_estimate
     squared = np.sum((estimate[a:b + 1, p] - spline[a:b + 1, p]) ** 2, axis=1)
     known = np.isfinite(squared)
