@@ -51,6 +51,9 @@ SPREAD_FLOOR = 0.005
 #: donors in a line (a skeleton's chain) leave the turn about it free: the least turn is taken
 #: there, not the one the rounding picks (:func:`~.posing.best_rotation`)
 LEAN = 1e-9
+#: the window of a partner's own spline in :func:`fill_spline_carried`: this many gap lengths
+#: either side of the gap (a natural spline's reach falls by about 4x a frame)
+CARRIED_PAD = 3
 #: (gap, donor set) pairs times frames that the search for the gaps' nearest references looks at
 #: in one batch
 NEAREST_CHUNK = 1 << 20
@@ -586,6 +589,53 @@ def fill_pattern(pos, only=None, cache=None):
         offsets = np.stack([pos[t, p] - pos[t, q] for t in ends])  # (ends, 3)
         out[a:b + 1, p] = pos[a:b + 1, q] + weights @ offsets
     return fill_linear(out) if only is None else out
+
+
+def fill_spline_carried(pos, spline, only, donors=RIGID_DONORS, cache=None):
+    """The cubic spline of each point through the take (``spline``: :func:`fill_spline` of
+    ``pos``) carried by how far its partners stray from theirs over the gap: on each gap with
+    both ends in the take that starts in ``only`` (a (frames, points) mask), the spline plus
+    the mean of what the ``donors`` partners seen across the gap (and a frame either side) whose
+    offset to the point varied least do beyond a spline of their own with the gap's frames
+    hidden (over a window of :data:`CARRIED_PAD` gap lengths either side), weighted by the inverse of that variance. What a
+    spline misses where most of the body is gone at once (a landing, a turn) the body's seen
+    points miss too. Equal to ``p`` + a spline of its offset to the partner, so a pattern fill
+    whose offset follows a spline, not a straight line. Gaps without a partner keep ``spline``;
+    the others outside ``only`` are NaN. ``cache``: :func:`fill_pattern`'s."""
+    from scipy.interpolate import CubicSpline
+
+    pos = np.asarray(pos, dtype=np.float64)
+    frames = len(pos)
+    seen = np.isfinite(pos[..., 0])
+    out = np.full(pos.shape, np.nan)
+    stats = {} if cache is None else cache
+    strayed = {}  # (partner, first, last): its track less its spline over those frames
+
+    def stray(q, a, b):
+        if (q, a, b) not in strayed:
+            pad = CARRIED_PAD * (b - a + 1)
+            lo, hi = max(0, a - pad), min(frames, b + 1 + pad)
+            t = np.arange(lo, hi)
+            ok = seen[lo:hi, q] & ((t < a) | (t > b))
+            strayed[q, a, b] = pos[a:b + 1, q] - CubicSpline(
+                t[ok], pos[lo:hi, q][ok], bc_type="natural")(np.arange(a, b + 1))
+        return strayed[q, a, b]
+
+    for p, a, b in gap_runs(~seen):
+        if a == 0 or b == frames - 1 or not only[a, p]:
+            continue
+        out[a:b + 1, p] = spline[a:b + 1, p]
+        if p not in stats:
+            stats[p] = _pair_stats(pos, p, seen)[1]
+        usable = seen[a - 1:b + 2].all(axis=0) & np.isfinite(stats[p])
+        if not usable.any():
+            continue
+        variance = np.where(usable, stats[p], np.inf)
+        chosen = np.argsort(variance)[:donors]
+        chosen = chosen[np.isfinite(variance[chosen])]
+        w = 1 / np.maximum(variance[chosen], RIGID_TIE ** 2)
+        out[a:b + 1, p] += sum(share * stray(q, a, b) for share, q in zip(w / w.sum(), chosen))
+    return out
 
 
 def fill_local_spline(pos, reference):

@@ -744,6 +744,17 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
         e_fill, e_spline = per_sample(copies), per_sample(hidden_spline)
     # a fill that left some of its copies open is no rival to the spline
     e_fill[np.isnan(e_fill) & longer.any(axis=0)] = np.inf
+    # where most of the body is gone, the spline carried by its partners' strays joins it
+    gone = np.zeros_like(probe)
+    for p, a, b in gaps:
+        gone[a:b + 1, p] = motion.missing[a:b + 1].mean() > AUTO_BODY_GONE
+    if gone.any():
+        carried = baselines.fill_spline_carried(motion.positions, spline, gone)
+        hidden = np.where(probe[..., None], np.nan, motion.positions)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            e_carried = per_sample(baselines.fill_spline_carried(
+                hidden, hidden_spline, longer & gone.any(axis=0)[None]))
+        lean, e_lean = _joined(e_spline, e_carried)
     out, joined = out.copy(), {}
     for p, a, b in gaps:
         # copies shorter than the gap (a limb gone for half the take) do not show how a spline
@@ -751,12 +762,15 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
         if not (b - a + 1 <= longest[p] and not np.isnan(e_fill[p])
                 and np.isfinite(e_spline[p])):
             continue
-        e_other = e_spline[p] * AUTO_SPLINE_TAIL
+        smooth, e_other = spline[a:b + 1, p], e_spline[p] * AUTO_SPLINE_TAIL
+        if gone[a, p] and lean[p] > 0:
+            smooth = (1 - lean[p]) * smooth + lean[p] * carried[a:b + 1, p]
+            e_other = e_lean[p]
         e_here = _off_the_spline(out, spline, motion.missing, p, a, b,
-                                 e_fill[p] * harder(p, a, b), e_other)
+                                 e_fill[p] * harder(p, a, b), e_spline[p] * AUTO_SPLINE_TAIL)
         share, squared = _joined(np.array(e_here), np.array(e_other), AUTO_JOIN_RAMP)
         if share > 0:  # where the fill has no value the spline alone
-            here, there = out[a:b + 1, p], spline[a:b + 1, p]
+            here, there = out[a:b + 1, p], smooth
             out[a:b + 1, p] = np.where(np.isnan(here), there, (1 - share) * here + share * there)
             joined[p, a] = float(share), 0.0, float(squared)
     if joined:

@@ -260,6 +260,33 @@ def test_pattern_fill_follows_the_donor_and_meets_both_gap_ends():
     assert np.isnan(part[260:, 0]).all() and list(cache) == [0]
 
 
+def test_spline_carried_by_its_partner_follows_the_partners_jolts_and_a_curved_offset():
+    """A point that rides on a partner jolting at random, its offset to it a cubic in time: the
+    spline misses the jolts, the pattern fill the offset's curve; the spline carried by how far
+    the partner strays from its own spline over the gap has both (a third point, gone at the
+    same frames, is no partner there). Gaps outside ``only`` stay NaN; a gap with no partner
+    seen across it keeps the spline."""
+    rng = np.random.default_rng(2)
+    frames = 400
+    donor = rng.normal(0, 0.01, (frames, 3)).cumsum(axis=0)
+    t = np.linspace(-1, 1, frames)[:, None]
+    offset = 0.3 + t * np.array([0.1, -0.2, 0.05]) + t ** 3 * np.array([0.2, 0.1, -0.3])
+    pos = np.stack([donor + offset, donor, rng.normal(0, 0.01, (frames, 3)).cumsum(axis=0)],
+                   axis=1)
+    gappy = pos.copy()
+    gappy[150:210, 0] = gappy[140:220, 2] = np.nan
+    gappy[300:330, 0] = gappy[300:330, 1] = gappy[300:330, 2] = np.nan  # no partner seen
+    only = np.zeros(gappy.shape[:2], bool)
+    only[[150, 300], 0] = True
+    spline = baselines.fill_spline(gappy)
+    out = baselines.fill_spline_carried(gappy, spline, only)
+    error = {name: np.abs(estimate[150:210, 0] - pos[150:210, 0]).max() for name, estimate in
+             (("carried", out), ("spline", spline), ("pattern", baselines.fill_pattern(gappy)))}
+    assert error["carried"] < 1e-6 < 1e-3 < min(error["spline"], error["pattern"]), error
+    np.testing.assert_array_equal(out[300:330, 0], spline[300:330, 0])
+    assert np.isnan(out[300:330, 1:]).all() and np.isnan(out[140:220, 2]).all()
+
+
 def test_local_spline_is_exact_for_a_body_that_only_walks_and_turns():
     """A still pose carried along a path, turning to and fro: a spline in the body frame is
     exact, a spline in the world is not."""
