@@ -609,32 +609,39 @@ def fill_spline_carried(pos, spline, only, donors=RIGID_DONORS, cache=None):
     seen = np.isfinite(pos[..., 0])
     out = np.full(pos.shape, np.nan)
     stats = {} if cache is None else cache
-    strayed = {}  # (partner, first, last): its track less its spline over those frames
-
-    def stray(q, a, b):
-        if (q, a, b) not in strayed:
-            pad = CARRIED_PAD * (b - a + 1)
-            lo, hi = max(0, a - pad), min(frames, b + 1 + pad)
-            t = np.arange(lo, hi)
-            ok = seen[lo:hi, q] & ((t < a) | (t > b))
-            strayed[q, a, b] = pos[a:b + 1, q] - CubicSpline(
-                t[ok], pos[lo:hi, q][ok], bc_type="natural")(np.arange(a, b + 1))
-        return strayed[q, a, b]
-
+    chosen = {}  # (first, last) -> [(point, partners, shares)]
     for p, a, b in gap_runs(~seen):
         if a == 0 or b == frames - 1 or not only[a, p]:
             continue
         out[a:b + 1, p] = spline[a:b + 1, p]
         if p not in stats:
             stats[p] = _pair_stats(pos, p, seen)[1]
-        usable = seen[a - 1:b + 2].all(axis=0) & np.isfinite(stats[p])
-        if not usable.any():
-            continue
-        variance = np.where(usable, stats[p], np.inf)
-        chosen = np.argsort(variance)[:donors]
-        chosen = chosen[np.isfinite(variance[chosen])]
-        w = 1 / np.maximum(variance[chosen], RIGID_TIE ** 2)
-        out[a:b + 1, p] += sum(share * stray(q, a, b) for share, q in zip(w / w.sum(), chosen))
+        variance = np.where(seen[a - 1:b + 2].all(axis=0), stats[p], np.inf)
+        partners = np.argsort(variance)[:donors]
+        partners = partners[np.isfinite(variance[partners])]
+        if len(partners):
+            w = 1 / np.maximum(variance[partners], RIGID_TIE ** 2)
+            chosen.setdefault((a, b), []).append((p, partners, w / w.sum()))
+    for (a, b), gaps in chosen.items():
+        pad = CARRIED_PAD * (b - a + 1)
+        lo, hi = max(0, a - pad), min(frames, b + 1 + pad)
+        t = np.arange(lo, hi)
+        outside = (t < a) | (t > b)
+        partners = np.unique(np.concatenate([q for _, q, _ in gaps]))
+        # a partner's track less its spline over the gap, one spline for those seen throughout
+        # the window
+        stray = {}
+        whole = seen[lo:hi, partners].all(axis=0)
+        groups = [partners[whole]] + [[q] for q in partners[~whole]]
+        for group in groups:
+            if not len(group):
+                continue
+            ok = outside & seen[lo:hi, group].all(axis=1)
+            track = pos[lo:hi][:, group]
+            fitted = CubicSpline(t[ok], track[ok], bc_type="natural")(np.arange(a, b + 1))
+            stray.update(zip(group, np.moveaxis(pos[a:b + 1][:, group] - fitted, 1, 0)))
+        for p, qs, shares in gaps:
+            out[a:b + 1, p] += sum(share * stray[q] for share, q in zip(shares, qs))
     return out
 
 
