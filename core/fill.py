@@ -768,7 +768,10 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
             e_other = e_lean[p]
         e_here = _off_the_spline(out, spline, motion.missing, p, a, b,
                                  e_fill[p] * harder(p, a, b), e_spline[p] * AUTO_SPLINE_TAIL)
-        share, squared = _joined(np.array(e_here), np.array(e_other), AUTO_JOIN_RAMP)
+        # where most of the body is gone the fill's copies vouch for it more than the gap bears
+        # out (:func:`_off_the_spline`): the smooth estimate joins by inverse errors, unramped
+        share, squared = _joined(np.array(e_here), np.array(e_other),
+                                 None if gone[a, p] else AUTO_JOIN_RAMP)
         if share > 0:  # where the fill has no value the spline alone
             here, there = out[a:b + 1, p], smooth
             out[a:b + 1, p] = np.where(np.isnan(here), there, (1 - share) * here + share * there)
