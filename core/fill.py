@@ -724,9 +724,15 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     its error has a tail that its copies do not foresee). Where most of the body is gone at
     once (a subject half out of the volume, a prop in the way) the donors left are far from the
     point and the knowledge base's models see few points: both stray by far more than the
-    spline over a few tenths of a second. Returns the fill and, per gap joined (``(point,
-    first frame)``), the spline's share, none of a pattern's and the blend's expected squared
-    error per sample."""
+    spline over a few tenths of a second. There (more than :data:`AUTO_BODY_GONE` of the points
+    gone on the mean over the gap) the spline is first joined by itself carried by how far its
+    steadiest partners seen stray from their own splines over the gap
+    (:func:`~.baselines.fill_spline_carried`: a landing or a turn the spline misses, the seen
+    points miss too), by inverse errors on the same copies; that blend's error is not taken
+    twice over, and it joins the fill by inverse errors without the ramp (the fill's copies,
+    where more was seen, vouch for it more than the gap bears out). Returns the fill and, per
+    gap joined (``(point, first frame)``), the spline's share (the carried one's in it), none of
+    a pattern's and the blend's expected squared error per sample."""
     gaps = _longer_gaps(motion.missing, motion.fps)
     if not gaps:
         return out, {}
@@ -745,6 +751,7 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     # a fill that left some of its copies open is no rival to the spline
     e_fill[np.isnan(e_fill) & longer.any(axis=0)] = np.inf
     # where most of the body is gone, the spline carried by its partners' strays joins it
+    # (chosen on the tuning takes, docs/METHOD_NOTES.md, session 56)
     gone = np.zeros_like(probe)
     for p, a, b in gaps:
         gone[a:b + 1, p] = motion.missing[a:b + 1].mean() > AUTO_BODY_GONE
