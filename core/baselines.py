@@ -597,11 +597,13 @@ def fill_spline_carried(pos, spline, only, donors=RIGID_DONORS, cache=None):
     both ends in the take that starts in ``only`` (a (frames, points) mask), the spline plus
     the mean of what the ``donors`` partners seen across the gap (and a frame either side) whose
     offset to the point varied least do beyond a spline of their own with the gap's frames
-    hidden (over a window of :data:`CARRIED_PAD` gap lengths either side), weighted by the inverse of that variance. What a
-    spline misses where most of the body is gone at once (a landing, a turn) the body's seen
-    points miss too. Equal to ``p`` + a spline of its offset to the partner, so a pattern fill
-    whose offset follows a spline, not a straight line. Gaps without a partner keep ``spline``;
-    the others outside ``only`` are NaN. ``cache``: :func:`fill_pattern`'s."""
+    hidden (over a window of :data:`CARRIED_PAD` gap lengths either side), weighted by the
+    inverse of that variance; where fewer partners are seen, their mean counts for their share
+    of ``donors`` (one far partner's stray is its own). What a spline misses where most of the
+    body is gone at once (a landing, a turn) the body's seen points miss too. With one partner,
+    equal to it plus a spline of the point's offset to it: a pattern fill whose offset follows a
+    spline, not a straight line. Gaps without a partner keep ``spline``; the others outside
+    ``only`` are NaN. ``cache``: :func:`fill_pattern`'s."""
     from scipy.interpolate import CubicSpline
 
     pos = np.asarray(pos, dtype=np.float64)
@@ -621,7 +623,9 @@ def fill_spline_carried(pos, spline, only, donors=RIGID_DONORS, cache=None):
         partners = partners[np.isfinite(variance[partners])]
         if len(partners):
             w = 1 / np.maximum(variance[partners], RIGID_TIE ** 2)
-            chosen.setdefault((a, b), []).append((p, partners, w / w.sum()))
+            # fewer partners than ``donors``: their stray for that share of the whole
+            chosen.setdefault((a, b), []).append(
+                (p, partners, w / w.sum() * len(partners) / donors))
     for (a, b), gaps in chosen.items():
         pad = CARRIED_PAD * (b - a + 1)
         lo, hi = max(0, a - pad), min(frames, b + 1 + pad)

@@ -264,8 +264,9 @@ def test_spline_carried_by_its_partner_follows_the_partners_jolts_and_a_curved_o
     """A point that rides on a partner jolting at random, its offset to it a cubic in time: the
     spline misses the jolts, the pattern fill the offset's curve; the spline carried by how far
     the partner strays from its own spline over the gap has both (a third point, gone at the
-    same frames, is no partner there). Gaps outside ``only`` stay NaN; a gap with no partner
-    seen across it keeps the spline."""
+    same frames, is no partner there). Asked for three partners, the one seen counts for a
+    third. Gaps outside ``only`` stay NaN; a gap with no partner seen across it keeps the
+    spline."""
     rng = np.random.default_rng(2)
     frames = 400
     donor = rng.normal(0, 0.01, (frames, 3)).cumsum(axis=0)
@@ -279,10 +280,13 @@ def test_spline_carried_by_its_partner_follows_the_partners_jolts_and_a_curved_o
     only = np.zeros(gappy.shape[:2], bool)
     only[[150, 300], 0] = True
     spline = baselines.fill_spline(gappy)
-    out = baselines.fill_spline_carried(gappy, spline, only)
+    out = baselines.fill_spline_carried(gappy, spline, only, donors=1)
     error = {name: np.abs(estimate[150:210, 0] - pos[150:210, 0]).max() for name, estimate in
              (("carried", out), ("spline", spline), ("pattern", baselines.fill_pattern(gappy)))}
     assert error["carried"] < 1e-6 < 1e-3 < min(error["spline"], error["pattern"]), error
+    third = baselines.fill_spline_carried(gappy, spline, only)
+    np.testing.assert_allclose(third[150:210, 0] - spline[150:210, 0],
+                               (out[150:210, 0] - spline[150:210, 0]) / 3, atol=1e-12)
     np.testing.assert_array_equal(out[300:330, 0], spline[300:330, 0])
     assert np.isnan(out[300:330, 1:]).all() and np.isnan(out[140:220, 2]).all()
 

@@ -921,7 +921,7 @@ def test_auto_doubts_a_fill_that_strays_from_the_spline_where_most_of_the_body_i
     inequality), whatever its copies said; the spline then takes the gap. Where few points are gone (the `markers`
     protocol at 10 %) nothing changes. Measured when written (mm): bursts auto 18.1, without the
     bound 29.9, spline 14.6; markers at 10 % auto 6.7 either way (spline 101.3). With the
-    spline carried by the partners left (the next test; session 56): auto 12.4, without the
+    spline carried by the partners left (the next test; session 56): auto 12.5, without the
     bound 15.4."""
     from mocap_gapfill.core import fill as fill_module
 
@@ -959,7 +959,7 @@ def test_auto_carries_the_spline_by_the_partners_left_where_most_of_the_body_is_
     their own splines over the gap, weighed against the plain one by their errors on the
     copies. Where few points
     are gone (the `markers` protocol at 10 %) nothing changes. Measured when written (mm):
-    bursts auto 44.1, without the carried spline 52.9, spline 58.9, pattern 65.3; markers at
+    bursts auto 44.5, without the carried spline 52.9, spline 58.9, pattern 65.3; markers at
     10 % the same fill either way."""
     c3d = data_dir / "cmu/c3d"
     kb = build_kb([c3d / "02_05.c3d", c3d / "135_02.c3d"])
