@@ -1078,8 +1078,12 @@ def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
     miss = punch_gaps(take.n_frames, take.n_points, "markers", 0.3, np.random.default_rng(0))
     points_done = []  # the rigid estimates go one point (all its gaps) at a time
     real = baselines._carry
+    gaps_done = 2 * miss.any(axis=0).sum()  # the gaps' estimates, from both ends
+    started = threading.Event()  # the first fill started
 
     def counted(*args, **kwargs):
+        if len(points_done) >= gaps_done:  # the copies' wait for the first fill (no race on a
+            started.wait(10)  # busy machine: the order is the test's, the counts exact)
         points_done.append(1)
         return real(*args, **kwargs)
 
@@ -1087,6 +1091,7 @@ def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
 
     def interrupted(*args, **kwargs):  # the user presses Ctrl-C once the estimates are going
         beside.append(len(points_done))
+        started.set()
         while len(points_done) < beside[0] + 3:
             time.sleep(0.001)
         raise KeyboardInterrupt
@@ -1098,7 +1103,7 @@ def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
         with pytest.raises(KeyboardInterrupt):
             fill(with_gaps(take, miss), "auto", kb=build_kb([c3d / "01_01.c3d"]))
     assert threading.active_count() == before
-    assert beside[0] == 2 * miss.any(axis=0).sum()  # the gaps' estimates, from both ends
+    assert beside[0] == gaps_done  # the gaps' estimates came before the first fill
     calls = 2 * (miss | validation_gaps(miss, AUTO_PROBES)).any(axis=0).sum()  # the copies'
     assert len(points_done) - beside[0] < calls / 10  # they stopped well short of every point
     with pytest.raises(KeyboardInterrupt):
