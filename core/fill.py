@@ -95,6 +95,11 @@ AUTO_SPLINE_TAIL = 2.0
 #: and 0.7 gave the same; at 1 time the spline's error the gains were the same, the losses larger)
 AUTO_BODY_GONE = 0.5
 AUTO_OFF_SPLINE = 2.0
+#: there, a short gap's fill is expected to err this many times (squared) what its copies said,
+#: where more of the body was seen (:func:`_with_spline`; chosen on the tuning takes,
+#: docs/METHOD_NOTES.md, session 56: 2, 4, 8 and leaving the fill out gained 0.6-1.2 %, the
+#: losses growing with it)
+AUTO_GONE_DOUBT = 4.0
 #: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
 #: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
 #: went astray on the tuning takes, where the partner's pattern carries them: docs/METHOD_NOTES.md,
@@ -926,6 +931,8 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
             e_pattern = np.inf  # no donor spans the gap or one of its copies
         e_here = _off_the_spline(out, spline, missing, p, a, b, e_here, e_spline)
         e_pattern = _off_the_spline(pattern, spline, missing, p, a, b, e_pattern, e_spline)
+        if missing[a:b + 1].mean() > AUTO_BODY_GONE:  # the fill's copies saw more of the body
+            e_here *= AUTO_GONE_DOUBT
         w, squared = _weigh_in(out, p, a, b, (spline, pattern), (e_here, e_spline, e_pattern),
                                (1.0, 1.0, AUTO_PATTERN_WEIGHT))
         shares[p, a] = w[1], w[2], squared
