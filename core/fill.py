@@ -879,7 +879,9 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     other points; over longer gaps its error grows fast, with a tail its copies do not foresee, so
     only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline
     across them: :func:`_with_pattern_ends`) and points without copies keep ``out``;
-    the pattern joins only where a partner spans the gap and each of its copies. Returns the
+    the pattern joins only where a partner spans the gap and each of its copies. Where more
+    than :data:`AUTO_BODY_GONE` of the points are gone over the gap, ``out``'s error is taken
+    :data:`AUTO_GONE_DOUBT` times over (its copies saw more of the body). Returns the
     blend and, per gap blended (``(point, first frame)``), the spline's and the pattern's shares
     and the blend's expected squared error (the errors as if independent)."""
     from .baselines import fill_pattern, fill_spline
