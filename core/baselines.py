@@ -591,7 +591,7 @@ def fill_pattern(pos, only=None, cache=None):
     return fill_linear(out) if only is None else out
 
 
-def fill_spline_carried(pos, spline, only, donors=RIGID_DONORS, cache=None):
+def fill_spline_carried(pos, spline, only, donors=RIGID_DONORS):
     """The cubic spline of each point through the take (``spline``: :func:`fill_spline` of
     ``pos``) carried by how far its partners stray from theirs over the gap: on each gap with
     both ends in the take that starts in ``only`` (a (frames, points) mask), the spline plus
@@ -603,14 +603,14 @@ def fill_spline_carried(pos, spline, only, donors=RIGID_DONORS, cache=None):
     body is gone at once (a landing, a turn) the body's seen points miss too. With one partner,
     equal to it plus a spline of the point's offset to it: a pattern fill whose offset follows a
     spline, not a straight line. Gaps without a partner keep ``spline``; the others outside
-    ``only`` are NaN. ``cache``: :func:`fill_pattern`'s."""
+    ``only`` are NaN."""
     from scipy.interpolate import CubicSpline
 
     pos = np.asarray(pos, dtype=np.float64)
     frames = len(pos)
     seen = np.isfinite(pos[..., 0])
     out = np.full(pos.shape, np.nan)
-    stats = {} if cache is None else cache
+    stats = {}  # each point's offset variance to every other
     chosen = {}  # (first, last) -> [(point, partners, shares)]
     for p, a, b in gap_runs(~seen):
         if a == 0 or b == frames - 1 or not only[a, p]:

@@ -759,7 +759,7 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     # (chosen on the tuning takes, docs/METHOD_NOTES.md, session 56)
     gone = np.zeros_like(probe)
     for p, a, b in gaps:
-        gone[a:b + 1, p] = motion.missing[a:b + 1].mean() > AUTO_BODY_GONE
+        gone[a:b + 1, p] = _body_gone(motion.missing, a, b)
     if gone.any():
         carried = baselines.fill_spline_carried(motion.positions, spline, gone)
         hidden = np.where(probe[..., None], np.nan, motion.positions)
@@ -933,7 +933,7 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
             e_pattern = np.inf  # no donor spans the gap or one of its copies
         e_here = _off_the_spline(out, spline, missing, p, a, b, e_here, e_spline)
         e_pattern = _off_the_spline(pattern, spline, missing, p, a, b, e_pattern, e_spline)
-        if missing[a:b + 1].mean() > AUTO_BODY_GONE:  # the fill's copies saw more of the body
+        if _body_gone(missing, a, b):  # the fill's copies saw more of the body
             e_here *= AUTO_GONE_DOUBT
         w, squared = _weigh_in(out, p, a, b, (spline, pattern), (e_here, e_spline, e_pattern),
                                (1.0, 1.0, AUTO_PATTERN_WEIGHT))
@@ -947,6 +947,12 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     return out, shares
 
 
+def _body_gone(missing, a, b):
+    """Whether more than :data:`AUTO_BODY_GONE` of the points are gone on the mean over the
+    frames ``a``-``b`` (a subject half out of the volume, a prop in the way, a dropped frame)."""
+    return bool(missing[a:b + 1].mean() > AUTO_BODY_GONE)
+
+
 def _off_the_spline(estimate, spline, missing, p, a, b, e_estimate, e_spline):
     """``estimate``'s expected squared error per sample on the gap ``a``-``b`` of point ``p``
     (``e_estimate``, from copies), raised where more than :data:`AUTO_BODY_GONE` of the points
@@ -958,7 +964,7 @@ def _off_the_spline(estimate, spline, missing, p, a, b, e_estimate, e_spline):
     seen vouch for it less than for the spline, which needs nothing but the point's own track
     (on bursts of the tuning takes the fill strayed 4-9 times further than its copies
     foretold)."""
-    if not (np.isfinite(e_estimate) and missing[a:b + 1].mean() > AUTO_BODY_GONE):
+    if not (np.isfinite(e_estimate) and _body_gone(missing, a, b)):
         return e_estimate
     squared = np.sum((estimate[a:b + 1, p] - spline[a:b + 1, p]) ** 2, axis=1)
     known = np.isfinite(squared)
