@@ -911,6 +911,30 @@ def test_auto_lets_a_spline_join_gaps_where_most_of_the_body_is_gone(data_dir, m
     assert sum(a.spline > 0 for a in accounts) > len(accounts) / 3
 
 
+def _cmu_first_frames(data_dir, name, kb_takes):
+    """CMU C3D take ``name``'s first 1,800 complete frames at 120 fps and a knowledge base of
+    ``kb_takes`` (other subjects)."""
+    c3d = data_dir / "cmu/c3d"
+    kb = build_kb([c3d / f"{t}.c3d" for t in kb_takes])
+    return complete_take(read_motion(c3d / f"{name}.c3d"), kb.names).frame_range(0, 1800), kb
+
+
+def _auto_against(take, kb, protocol, setting, patch, target, name, value):
+    """RMSE (mm) over the gaps ``protocol`` punches at ``setting`` (drawn from its label, as
+    :func:`evaluate` does) of ``auto``, of the spline, and of ``auto`` with ``target.name`` set
+    to ``value`` (``patch``: a monkeypatch)."""
+    label = f"{'rate' if protocol == 'markers' else 'l'}={setting}"
+    miss = punch_gaps(take.n_frames, take.n_points, protocol, setting,
+                      np.random.default_rng([0, *label.encode()]))
+    query = with_gaps(take, miss)
+    out = {"auto": rmse_mm(fill(query, "auto", kb=kb), take, miss),
+           "spline": rmse_mm(fill(query, "spline"), take, miss)}
+    with patch.context() as patched:
+        patched.setattr(target, name, value)
+        out["patched"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
+    return out
+
+
 def test_auto_doubts_a_fill_that_strays_from_the_spline_where_most_of_the_body_is_gone(
         data_dir, monkeypatch):
     """01_01's first 1,800 complete frames (subject out of the KB) with bursts of 30 frames at
@@ -925,28 +949,15 @@ def test_auto_doubts_a_fill_that_strays_from_the_spline_where_most_of_the_body_i
     bound 15.4."""
     from mocap_gapfill.core import fill as fill_module
 
-    c3d = data_dir / "cmu/c3d"
-    kb = build_kb([c3d / "02_05.c3d", c3d / "135_02.c3d"])
-    take = complete_take(read_motion(c3d / "01_01.c3d"), kb.names).frame_range(0, 1800)
-
-    def scores(protocol, setting, label):
-        miss = punch_gaps(take.n_frames, take.n_points, protocol, setting,
-                          np.random.default_rng([0, *label.encode()]))
-        query = with_gaps(take, miss)
-        out = {"auto": rmse_mm(fill(query, "auto", kb=kb), take, miss),
-               "spline": rmse_mm(fill(query, "spline"), take, miss)}
-        with monkeypatch.context() as patch:
-            patch.setattr(fill_module, "_off_the_spline", lambda *args: args[6])
-            out["unbound"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
-        return out
-
-    bursts = scores("bursts", 30, "l=30")
+    take, kb = _cmu_first_frames(data_dir, "01_01", ("02_05", "135_02"))
+    unbound = (fill_module, "_off_the_spline", lambda *args: args[6])
+    bursts = _auto_against(take, kb, "bursts", 30, monkeypatch, *unbound)
     print(bursts)
-    assert bursts["auto"] < 0.9 * bursts["unbound"]
+    assert bursts["auto"] < 0.9 * bursts["patched"]
     assert bursts["auto"] < 1.3 * bursts["spline"]
-    few = scores("markers", 0.1, "rate=0.1")
+    few = _auto_against(take, kb, "markers", 0.1, monkeypatch, *unbound)
     print(few)
-    assert few["auto"] == few["unbound"]
+    assert few["auto"] == few["patched"]
 
 
 def test_auto_carries_the_spline_by_the_partners_left_where_most_of_the_body_is_gone(
@@ -961,29 +972,16 @@ def test_auto_carries_the_spline_by_the_partners_left_where_most_of_the_body_is_
     are gone (the `markers` protocol at 10 %) nothing changes. Measured when written (mm):
     bursts auto 44.5, without the carried spline 52.9, spline 58.9, pattern 65.3; markers at
     10 % the same fill either way."""
-    c3d = data_dir / "cmu/c3d"
-    kb = build_kb([c3d / "02_05.c3d", c3d / "135_02.c3d"])
-    take = complete_take(read_motion(c3d / "01_01.c3d"), kb.names).frame_range(0, 1800)
+    take, kb = _cmu_first_frames(data_dir, "01_01", ("02_05", "135_02"))
     real = baselines.fill_spline_carried
-
-    def scores(protocol, setting, label):
-        miss = punch_gaps(take.n_frames, take.n_points, protocol, setting,
-                          np.random.default_rng([0, *label.encode()]))
-        query = with_gaps(take, miss)
-        out = {"auto": rmse_mm(fill(query, "auto", kb=kb), take, miss),
-               "spline": rmse_mm(fill(query, "spline"), take, miss)}
-        with monkeypatch.context() as patch:  # a carried spline that refilled no copy
-            patch.setattr(baselines, "fill_spline_carried",
-                          lambda *args, **kw: np.full(real(*args, **kw).shape, np.nan))
-            out["plain"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
-        return out
-
-    bursts = scores("bursts", 60, "l=60")
+    plain = (baselines, "fill_spline_carried",  # a carried spline that refilled no copy
+             lambda *args, **kw: np.full(real(*args, **kw).shape, np.nan))
+    bursts = _auto_against(take, kb, "bursts", 60, monkeypatch, *plain)
     print(bursts)
-    assert bursts["auto"] < 0.9 * min(bursts["plain"], bursts["spline"])
-    few = scores("markers", 0.1, "rate=0.1")
+    assert bursts["auto"] < 0.9 * min(bursts["patched"], bursts["spline"])
+    few = _auto_against(take, kb, "markers", 0.1, monkeypatch, *plain)
     print(few)
-    assert few["auto"] == few["plain"]
+    assert few["auto"] == few["patched"]
 
 
 def test_auto_doubts_a_short_gaps_fill_where_most_of_the_body_is_gone(data_dir, monkeypatch):
@@ -995,18 +993,12 @@ def test_auto_doubts_a_short_gaps_fill_where_most_of_the_body_is_gone(data_dir, 
     the copies taken at their word 0.67, spline 0.51, pattern 2.35."""
     from mocap_gapfill.core import fill as fill_module
 
-    c3d = data_dir / "cmu/c3d"
-    kb = build_kb([c3d / "02_05.c3d", c3d / "01_01.c3d"])
-    take = complete_take(read_motion(c3d / "135_02.c3d"), kb.names).frame_range(0, 1800)
-    miss = punch_gaps(take.n_frames, take.n_points, "bursts", 3,
-                      np.random.default_rng([0, *b"l=3"]))
-    query = with_gaps(take, miss)
-    doubted = rmse_mm(fill(query, "auto", kb=kb), take, miss)
-    monkeypatch.setattr(fill_module, "AUTO_GONE_DOUBT", 1.0)
-    trusted = rmse_mm(fill(query, "auto", kb=kb), take, miss)
-    print(doubted, trusted)
-    assert doubted < 0.92 * trusted
-    assert doubted < 1.25 * rmse_mm(fill(query, "spline"), take, miss)
+    take, kb = _cmu_first_frames(data_dir, "135_02", ("02_05", "01_01"))
+    bursts = _auto_against(take, kb, "bursts", 3, monkeypatch, fill_module, "AUTO_GONE_DOUBT",
+                           1.0)
+    print(bursts)
+    assert bursts["auto"] < 0.92 * bursts["patched"]  # the copies taken at their word
+    assert bursts["auto"] < 1.25 * bursts["spline"]
 
 
 def test_auto_without_a_knowledge_base_fills_dropped_frames(data_dir):
