@@ -218,3 +218,36 @@ def test_a_file_that_hangs_ezc3d_gives_a_parse_error(data_dir, tmp_path, monkeyp
     monkeypatch.setattr(c3d, "READ_TIMEOUT", 3)
     with pytest.raises(ParseError, match="took over 3 s"):
         c3d.read_c3d(path)
+
+
+def test_a_read_killed_midway_leaves_no_folder_behind_for_long(data_dir, tmp_path, monkeypatch):
+    """A process killed while ezc3d reads (a batch worker stopped by Ctrl-C, a Blender that
+    crashed) cannot remove its read's temporary folder; the next read removes it once no read
+    can still be using it, and leaves younger folders alone."""
+    import os
+    import tempfile
+
+    from mocap_gapfill.core.formats import c3d
+
+    folders = tmp_path / "tmp"
+    folders.mkdir()
+    slow = ("import time; from mocap_gapfill.core.formats import c3d; "
+            "c3d._READER = 'import time; time.sleep(60)'; c3d.read_c3d(%r)"
+            % str(data_dir / "cmu/c3d/85_02.c3d"))
+    victim = subprocess.Popen([sys.executable, "-c", slow],
+                              env=dict(os.environ, TMPDIR=str(folders)))
+    deadline = time.monotonic() + 30
+    while not list(folders.glob(c3d.READ_FOLDER_PREFIX + "*")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    victim.kill()
+    victim.wait()
+    (left,) = folders.glob(c3d.READ_FOLDER_PREFIX + "*")  # what the kill leaves
+    young = folders / (c3d.READ_FOLDER_PREFIX + "young")
+    young.mkdir()
+    old = time.time() - 2 * c3d.READ_TIMEOUT - 60
+    os.utime(left, (old, old))
+    monkeypatch.setattr(tempfile, "tempdir", str(folders))
+    assert c3d.read_c3d(data_dir / "cmu/c3d/85_02.c3d").n_frames > 0
+    assert not left.exists()
+    assert young.exists()
+    assert not [f for f in folders.iterdir() if f != young]  # the read's own folder went too

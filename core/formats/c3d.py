@@ -5,7 +5,9 @@ frame rate), which inside Blender would take the user's session down. Worse, som
 damage its memory without crashing at once (a later read then crashes: seen in batch fuzzing).
 So every file is checked structurally in pure Python (:func:`precheck`), then read by ezc3d in a
 short-lived child process whose arrays come back through a temporary ``.npz``: a crash or a hang
-there becomes a :class:`ParseError`. Everything ezc3d needs is validated before it writes.
+there becomes a :class:`ParseError`. (Each read's temporary folder goes with the read; those a
+killed process left - a batch worker stopped by Ctrl-C, a Blender that crashed - go with the next
+read.) Everything ezc3d needs is validated before it writes.
 
 Gaps: a sample is missing when ezc3d gives NaN (its encoding of residual < 0), when the residual is
 negative, or when the point is exactly (0, 0, 0) (how some systems write gaps). A present sample
@@ -13,10 +15,12 @@ with residual exactly 0 was interpolated by some program: it reads as *filled*.
 """
 
 import os
+import shutil
 import struct
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +33,8 @@ MAX_FRAMES = 65535
 _UNITS = {"mm": ("mm", 0.001), "cm": ("cm", 0.01), "m": ("m", 1.0), "in": ("in", 0.0254)}
 #: seconds one read may take in the child process
 READ_TIMEOUT = 120
+#: the temporary folders the reads' arrays pass through (in the system's temporary folder)
+READ_FOLDER_PREFIX = "mocap_gapfill_c3d_"
 #: address space (MB) the child process may take beyond its start and 32x the file's size
 READ_MEMORY_MB = 2048
 #: the child process: read with ezc3d, save what we need (no pickle), exit 3 on a reported error
@@ -222,7 +228,8 @@ def _run_reader(path, out):
 
 def _read_isolated(path):
     """ezc3d's read in a child process: the arrays, or a ParseError (also on a crash/hang)."""
-    with tempfile.TemporaryDirectory(prefix="mocap_gapfill_c3d_") as tmp:
+    _sweep_stale_reads()
+    with tempfile.TemporaryDirectory(prefix=READ_FOLDER_PREFIX) as tmp:
         out = Path(tmp) / "read.npz"
         try:
             code, stderr = _run_reader(path, out)
@@ -236,6 +243,21 @@ def _read_isolated(path):
                              "it is corrupt", path)
         with np.load(out, allow_pickle=False) as npz:
             return {k: npz[k] for k in npz.files}
+
+
+def _sweep_stale_reads(now=None):
+    """Remove the read folders a killed process left behind (a read's own folder goes when it
+    ends, but not when its process is killed mid-read): those older than twice
+    :data:`READ_TIMEOUT`, which no read still running can be. Folders it may not remove (another
+    user's) are left alone."""
+    oldest = (time.time() if now is None else now) - 2 * READ_TIMEOUT
+    for folder in Path(tempfile.gettempdir()).glob(READ_FOLDER_PREFIX + "*"):
+        try:
+            stale = folder.is_dir() and folder.stat().st_mtime < oldest
+        except OSError:  # gone meanwhile
+            continue
+        if stale:
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 def read_c3d(path):
