@@ -225,6 +225,7 @@ def test_a_read_killed_midway_leaves_no_folder_behind_for_long(data_dir, tmp_pat
     crashed) cannot remove its read's temporary folder; the next read removes it once no read
     can still be using it, and leaves younger folders alone."""
     import os
+    import signal
     import tempfile
 
     from mocap_gapfill.core.formats import c3d
@@ -234,12 +235,12 @@ def test_a_read_killed_midway_leaves_no_folder_behind_for_long(data_dir, tmp_pat
     slow = ("import time; from mocap_gapfill.core.formats import c3d; "
             "c3d._READER = 'import time; time.sleep(60)'; c3d.read_c3d(%r)"
             % str(data_dir / "cmu/c3d/85_02.c3d"))
-    victim = subprocess.Popen([sys.executable, "-c", slow],
+    victim = subprocess.Popen([sys.executable, "-c", slow], start_new_session=True,
                               env=dict(os.environ, TMPDIR=str(folders)))
     deadline = time.monotonic() + 30
     while not list(folders.glob(c3d.READ_FOLDER_PREFIX + "*")) and time.monotonic() < deadline:
         time.sleep(0.05)
-    victim.kill()
+    os.killpg(victim.pid, signal.SIGKILL)  # the process and its reading child
     victim.wait()
     (left,) = folders.glob(c3d.READ_FOLDER_PREFIX + "*")  # what the kill leaves
     young = folders / (c3d.READ_FOLDER_PREFIX + "young")

@@ -1,6 +1,7 @@
 """Add-on tests run inside the bpy module. Blender writes its user files to a temp dir."""
 
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -16,6 +17,12 @@ except ImportError:
 
 ROOT = Path(__file__).resolve().parents[2]
 LOCAL_MODULE = "bl_ext.mocap_gapfill_tests.mocap_gapfill"
+
+
+def pytest_unconfigure(config):
+    """The user folder goes with the run (before tests/conftest.py's exit, which on bpy 4.2
+    skips Python's own clean-up)."""
+    shutil.rmtree(_USER, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")
@@ -49,6 +56,8 @@ def extension(blender):
     yield blender
     addon_utils.disable(LOCAL_MODULE, default_set=True)
     repos.remove(repo)
+    (folder / "mocap_gapfill").unlink()  # the link, never the tree it points to
+    folder.rmdir()
 
 
 @pytest.fixture
