@@ -13,7 +13,8 @@ about the gapped one move over the gap than over its copies.
                                                    # without a knowledge base; FILLS=hermite,
                                                    # regress,match: those fills' departure,
                                                    # distance to auto's, error and distances
-                                                   # from each other too)
+                                                   # from each other too; LENGTHS=15,30:
+                                                   # only those gap lengths)
     python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, sessions 38, 52
     python tools/lost_gaps.py --tell OUT.jsonl     # how well each measure known at fill time
                                                    # tells the lost gaps (session 51; a FILLS run)
@@ -44,6 +45,7 @@ def run(out):
     paths = ([AMC / f"{t}.amc" for t in AMC_TUNING] if amc
              else [DAZ / t[:2] / f"{t}.bvh.gz" for t in DAZ_TUNING])
     only = os.environ.get("TAKES")
+    lengths = [int(x) for x in os.environ.get("LENGTHS", "").split(",") if x]
     paths = [p for p in paths if not only or any(t in p.name for t in only.split(","))]
     with open(out, "w") as sink:
         for path in paths:
@@ -52,6 +54,8 @@ def run(out):
             truth = rig.joints(basis_matrices(rig, channels, location))
             below = rig.placed_by()
             for n, l in BONE_SETTINGS:
+                if lengths and l not in lengths:
+                    continue
                 label = f"n={n},l={l}"
                 gaps = punch_bone_gaps(rig, len(channels), (n, l))
                 if not gaps.any():
