@@ -311,10 +311,13 @@ def how_filled(choices, bone, first, last):
     interpolation kept, also where the copies' fill was doubted all the way back to it; with
     the share of the way from it where the fill went part of the way,
     and how far on towards the consensus: the knowledge base's motion and the take's own
-    regression, or the regression alone without a knowledge base)
+    regression, or the regression alone without a knowledge base; on a short gap, the two fills
+    whose mean the part it kept of the interpolation went part of the way to, where they agree)
     and the copies' estimate of its error as a share of the interpolation's (the largest where
     several, 0 where none judged it). No error in millimetres: an armature's copies foretell
     the share, not the level (docs/METHOD_NOTES.md, session 34)."""
+    from ..core.bonefill import CORROBORATE
+
     parts = [c for c in choices if c.bone == bone and c.first <= last and c.last >= first]
     if not parts:
         return "", 0.0, 0.0
@@ -322,6 +325,8 @@ def how_filled(choices, bone, first, last):
                else f"{c.method} ({c.share:.0%} of the way)")
               + (f", then the mean of {c.towards}" if c.consensus == 1 else
                  f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
+              + (f", the rest {CORROBORATE:.0%} to {c.corroborated}, which agree"
+                 if c.corroborated else "")
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0

@@ -44,10 +44,12 @@ frames:
   halfway on to the mean of ``match`` and ``regress_kernel`` (``CONSENSUS``: three estimates
   from different evidence, averaged); the shorter gaps go from ``interp`` towards their fill
   only as far as the fills agree on the gap, and as far as it departs from ``interp`` beyond
-  the error its copies expect of it (``AUTO_WARY``); in a take too short for copies, a long
-  gap keeps ``interp`` where it and ``regress`` agree far more closely than either does with
-  ``match``, and takes the mean of ``match`` and ``regress_kernel`` where ``match`` would fill
-  it unjudged (``UNJUDGED_CONSENSUS``);
+  the error its copies expect of it (``AUTO_WARY``), and the part of the interpolation such a
+  gap keeps goes half way on to the mean of two stacked fills that agree on it (``CORROBORATE``:
+  two estimates from different evidence bearing each other out); in a take too short for
+  copies, a long gap keeps ``interp`` where it and ``regress`` agree far more closely than
+  either does with ``match``, and takes the mean of ``match`` and ``regress_kernel`` where
+  ``match`` would fill it unjudged (``UNJUDGED_CONSENSUS``);
   with a knowledge base of positions only, ``knn``, ``half`` (half-way from ``interp`` to
   ``knn``) and ``recall`` (subtrees carried onto the knowledge base's guess from the known
   joints alone: a KB that holds the motion) stand in; without a knowledge base (a rig no
@@ -122,6 +124,14 @@ AUTO_DOUBT = 0.1
 #: shrinkage towards the interpolation; chosen on non-test takes, docs/METHOD_NOTES.md,
 #: session 50)
 AUTO_WARY = 0.1
+#: then the part of the interpolation such a gap keeps (``1 - share``) goes this share of the way
+#: on to the mean of the two stacked fills (those of :data:`STACK_FILLS` but ``interp``) that agree
+#: on the gap - lie apart by less than :data:`CORROBORATED` times their mean departure from the
+#: interpolation, the closest such pair: two estimates from different evidence (the keys' motion,
+#: the rest of the body, the knowledge base) that bear each other out (:meth:`_Job._corroborated`;
+#: chosen on non-test takes, docs/METHOD_NOTES.md, session 57)
+CORROBORATE = 0.5
+CORROBORATED = 0.6
 #: ``regress``: the other bones' channels this many seconds either side count too; fitted within
 #: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
 REGRESS_LAGS = (0.05, 0.1)
@@ -209,7 +219,9 @@ class GapChoice:
     mean, drawn towards the take's mean over all copies as ``auto`` scores them); NaN where no
     copies judged the gap; ``consensus``: how far the fill then went on towards the mean of
     the fills named in ``towards`` (0: not at all; :data:`CONSENSUS_FILLS`, without a
-    knowledge base :data:`TAKE_ALONE_CONSENSUS`, joined by " + ")."""
+    knowledge base :data:`TAKE_ALONE_CONSENSUS`, joined by " + "); ``corroborated``: the two
+    fills (joined by " + ") whose mean the part of a short gap kept of the interpolation went
+    :data:`CORROBORATE` of the way on to, where they agree on the gap ("": none)."""
 
     bone: str
     first: int
@@ -219,6 +231,7 @@ class GapChoice:
     estimate: float = float("nan")
     consensus: float = 0.0
     towards: str = ""
+    corroborated: str = ""
 
 
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
@@ -302,11 +315,12 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     choices = job.choices or [(method, 0.0 if method == "interp" else 1.0)] * len(runs)
     estimates = job.estimates or [float("nan")] * len(runs)
     consensus = job.consensus or [0.0] * len(runs)
+    corroborated = job.corroborated or [None] * len(runs)
     towards = " + ".join(job.consensus_fills)
     return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate), further,
-                             towards if further else "")
-                   for (b, a, e), (name, share), estimate, further
-                   in zip(runs, choices, estimates, consensus)]
+                             towards if further else "", " + ".join(pair or ()))
+                   for (b, a, e), (name, share), estimate, further, pair
+                   in zip(runs, choices, estimates, consensus, corroborated)]
 
 
 class _Job:
@@ -324,7 +338,7 @@ class _Job:
         self.own = moves & (rig.roots if rig.lengths is not None else True)
         # auto's choice per gap, its estimate of it from the copies and how far the gap then
         # went on to the long-gap consensus (None: not auto)
-        self.choices = self.estimates = self.consensus = None
+        self.choices = self.estimates = self.consensus = self.corroborated = None
         # the fills auto stacks, and those its long gaps go on to: without a knowledge base,
         # the take's own
         self.stack_fills, self.long_fills = (
@@ -676,8 +690,9 @@ class _Job:
                         expected[i] = (estimates[i]
                                        * np.mean(np.sqrt(base[own] / samples[own]))) ** 2
         wanted = np.zeros_like(gaps)
-        for (b, a, e), (name, _) in zip(runs, choice):
-            wanted[a:e + 1, b] = name != "interp"
+        for (b, a, e), (name, _) in zip(runs, choice):  # a short gap may take a pair's mean
+            wanted[a:e + 1, b] = name != "interp" or (stack and e - a + 1 < LONG_STACK * self.fps)
+        corroborated = [None] * len(runs)
         if wanted.any():
             made = self.candidates(channels, location, wanted,
                                    {name for name, _ in choice} | set(fills), seen)
@@ -685,6 +700,7 @@ class _Job:
                 made["stack"] = self._stacked(made, wanted, self.stack_fills,
                                               lambda b, a: table)
                 choice = self._doubted(made, runs, choice, expected)
+                corroborated = self._corroborated(made, runs, choice)
             if any(longest):
                 made["stack_long"] = self._stacked(made, wanted, self.long_fills,
                                                    lambda b, a: long_table)
@@ -692,7 +708,7 @@ class _Job:
                 choice = self._outvoted(channels, location, wanted, seen, made, runs, choice)
         towards = self.consensus_fills
         agree = CONSENSUS if wanted.any() and set(towards) <= set(made) else 0.0
-        self.choices, self.estimates = choice, estimates
+        self.choices, self.estimates, self.corroborated = choice, estimates, corroborated
         onward = [agree if last else UNJUDGED_CONSENSUS * bool(agree) if unjudged_gap else 0.0
                   for last, unjudged_gap in zip(longest, unjudged)]
         self.consensus = [on if name != "interp"
@@ -707,18 +723,27 @@ class _Job:
             f"{n} long gaps {'to the mean of' if on == 1 else f'{on:.0%} of the way on to'} "
             f"{' + '.join(towards)}"
             for on, n in zip(*np.unique([on for on in self.consensus if on], return_counts=True)))
+        pairs = sum(pair is not None for pair in corroborated)
         self.report("auto: " + ", ".join(
             f"{name} on {n} of {len(runs)} gaps"
             + (f" ({partly[name]} part of the way from the interpolation)" if partly[name] else "")
             for name, n in counts.items())
-            + (f"; then {onwards}" if onwards else ""))
+            + (f"; then {onwards}" if onwards else "")
+            + (f"; the interpolated part of {pairs} short gaps {CORROBORATE:.0%} of the way on to "
+               "two fills that agree there" if pairs else ""))
         if not wanted.any():
             return seen
         out = seen.copy()
-        for (b, a, e), (name, share), further in zip(runs, choice, self.consensus):
+        for (b, a, e), (name, share), further, pair in zip(runs, choice, self.consensus,
+                                                           corroborated):
+            rows = slice(a, e + 1)
+            if pair:  # about the interpolation: the fill's share, the pair's mean on the rest
+                out[rows, b] = _about(seen[rows, b], [(made[name][rows, b], share)] + [
+                    (made[key][rows, b], CORROBORATE * (1 - share) / 2) for key in pair])
+                continue
             if name == "interp" or not share:
                 continue
-            span, rows = np.ones((e - a + 1, 1), bool), slice(a, e + 1)
+            span = np.ones((e - a + 1, 1), bool)
             fill = halfway(seen[rows, b:b + 1], made[name][rows, b:b + 1], span, share)
             if further:  # the mean of the fills, each of k taking 1/k of the way
                 target = made[towards[0]][rows, b:b + 1]
@@ -787,6 +812,36 @@ class _Job:
                 cut *= max(0.0, 1 - AUTO_WARY * expected[i] / max(departure, 1e-18))
             choice[i] = (name, share * cut)
         return choice
+
+    def _corroborated(self, made, runs, choice):
+        """Per gap shorter than :data:`LONG_STACK` that keeps part of the interpolation (share
+        below 1), the two stacked fills (of :data:`STACK_FILLS` but ``interp``) that lie closest
+        together as a share of their mean departure from ``interp`` (RMS over the joints the
+        gap's bone moves), where that share is below :data:`CORROBORATED`: the cubic from the
+        keys, the take's own regression and the knowledge base's motion owe each other nothing,
+        so where two of them agree on a motion the interpolation lacks, it is there (on the
+        non-test takes, docs/METHOD_NOTES.md, session 57). None elsewhere."""
+        fills = [f for f in self.stack_fills if f != "interp"]
+        spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (_, share)) in enumerate(zip(runs, choice))
+                 if share < 1 and e - a + 1 < LONG_STACK * self.fps and self.moved_by(b).any()]
+        out = [None] * len(runs)
+        if not spans or len(fills) < 2:
+            return out
+        worlds = {key: self._spans(made[key], spans) for key in ("interp", *fills)}
+        for k, (i, b, _, _) in enumerate(spans):
+            joints = self.moved_by(b)
+            at = {key: world[k][:, joints] for key, world in worlds.items()}
+
+            def apart(x, y):
+                return np.sqrt(np.mean(np.sum((at[x] - at[y]) ** 2, axis=-1)))
+
+            ratios = {(x, y): apart(x, y) / max(0.5 * (apart(x, "interp") + apart(y, "interp")),
+                                                1e-12)
+                      for m, x in enumerate(fills) for y in fills[m + 1:]}
+            pair = min(ratios, key=ratios.get)
+            if ratios[pair] < CORROBORATED:
+                out[i] = pair
+        return out
 
     def _stack_tables(self, made, truth, copies, fills):
         """The ``stack`` weights (:func:`~.stacking.weights`) the copies' errors give for the
@@ -937,6 +992,20 @@ def halfway(start, end, gaps, share=0.5):
     part[:, :3, :3] = (Rotation.from_rotvec((b * a.inv()).as_rotvec() * share) * a).as_matrix()
     part[:, :3, 3] = start[gaps][:, :3, 3] * (1 - share) + end[gaps][:, :3, 3] * share
     out[gaps] = part
+    return out
+
+
+def _about(base, parts):
+    """Basis matrices (frames, 4, 4): ``base`` turned by the weighted sum of the turns from it
+    to each of ``parts`` ((matrices, weight) pairs; rotation vectors summed, as ``stack`` weighs
+    its fills), located at the weighted sum of the moves from it."""
+    origin = Rotation.from_matrix(base[:, :3, :3])
+    turn = sum(weight * (Rotation.from_matrix(other[:, :3, :3]) * origin.inv()).as_rotvec()
+               for other, weight in parts)
+    out = base.copy()
+    out[:, :3, :3] = (Rotation.from_rotvec(turn) * origin).as_matrix()
+    out[:, :3, 3] = base[:, :3, 3] + sum(weight * (other[:, :3, 3] - base[:, :3, 3])
+                                         for other, weight in parts)
     return out
 
 

@@ -179,7 +179,7 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, sou
         for c in choices:
             span = auto[c.first:c.last + 1, rig.names.index(c.bone)]
             kept = np.array_equal(span, interp[c.first:c.last + 1, rig.names.index(c.bone)])
-            assert kept == (c.method == "interp" or c.share == 0), c
+            assert kept == ((c.method == "interp" or c.share == 0) and not c.corroborated), c
             # the thresholds are on squared errors, the estimate on RMS ones
             bar = np.sqrt(bonefill.PROMOTE if length >= bonefill.LONG_GAP * fps else (
                 bonefill.PROMOTE_SHORT_WHOLE if c.share == 1 else bonefill.PROMOTE_SHORT))
@@ -512,6 +512,69 @@ def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, d
     assert 0 < cut[0][1] < 0.75 / 2 and cut[1] == ("match", 1.0)
     longs = [("interp", 0.0), ("stack_long", 1.0)]
     assert job._doubted(dict(scatter, stack_long=truth), runs, longs, [1.0, 1.0]) == longs
+
+
+def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk, daz_kb,
+                                                                           monkeypatch):
+    """``_Job._corroborated`` on the walk's real poses: where two of the stacked fills (the
+    cubic, the take's regression, the knowledge base's motion) agree on a short gap and the third
+    strays, the gap's part of the interpolation goes ``CORROBORATE`` of the way to their mean;
+    where no two agree, or the gap took its fill all the way, or the gap is long, nothing
+    changes. Then ``auto`` on the walk (its subject out of the KB; a bone gapped over every other
+    stretch of 15 frames, at 120 fps) with and without it: measured 8.27 against 9.24 mm, the
+    interpolation 8.87 mm (which ``auto`` did not beat without it)."""
+    rig, channels, location, fps = walk
+    b = rig.names.index("lShldr")
+    gaps = np.zeros(channels.shape[:2], bool)
+    gaps[200:230, b] = gaps[300:330, b] = gaps[400:520, b] = True
+    truth = basis_matrices(rig, channels, location)
+    interp = basis_matrices(rig, interpolate_channels(channels, gaps), location)
+    off = truth.copy()
+    off[gaps, :3, :3] = Rotation.from_rotvec([0.0, 0.0, 1.5]).as_matrix() @ truth[gaps, :3, :3]
+    job = bonefill._Job(rig, fps, daz_kb, rig.roots, np.eye(4), None, None, None, None)
+    runs = gap_runs(gaps)
+    made = {"interp": interp, "hermite": truth, "regress": truth, "match": off}
+    choice = [("interp", 0.0), ("match", 1.0), ("match", 0.5)]
+    assert job._corroborated(made, runs, choice) == [("hermite", "regress"), None, None]
+    apart = dict(made, regress=interp)  # each pair lies as far apart as it departs
+    assert job._corroborated(apart, runs, choice) == [None, None, None]
+    # where the fill went part of the way, the rest goes half way on to the pair's mean
+    mixed = [("match", 0.5), ("interp", 0.0), ("match", 0.5)]
+    pairs = job._corroborated(made, runs, mixed)
+    assert pairs[:2] == [("hermite", "regress")] * 2 and pairs[2] is None
+    rows = slice(200, 230)
+    out = bonefill._about(interp[rows, b], [(off[rows, b], 0.5)] + [
+        (truth[rows, b], bonefill.CORROBORATE * 0.5 / 2)] * 2)
+    turn = Rotation.from_matrix(out[:, :3, :3]) * Rotation.from_matrix(
+        interp[rows, b, :3, :3]).inv()
+    want = (0.5 * (Rotation.from_matrix(off[rows, b, :3, :3])
+                   * Rotation.from_matrix(interp[rows, b, :3, :3]).inv()).as_rotvec()
+            + 0.25 * (Rotation.from_matrix(truth[rows, b, :3, :3])
+                      * Rotation.from_matrix(interp[rows, b, :3, :3]).inv()).as_rotvec())
+    assert np.allclose(turn.as_rotvec(), want, atol=1e-9)
+    # on the walk's own gaps, with and without the pairs
+    gaps = np.zeros(channels.shape[:2], bool)
+    rng = np.random.default_rng(5)
+    candidates = [rig.names.index(n) for n in ("lShldr", "rForeArm", "chest", "lThigh",
+                                               "rShin", "abdomen", "neck")]
+    for start in range(15, len(channels) - 15, 30):
+        gaps[start:start + 15, rng.choice(candidates)] = True
+    seen = interpolate_channels(channels, gaps)
+    unknown = rig.moved(gaps)
+    joints = rig.joints(truth)
+
+    def rmse(basis):
+        return 1000 * np.sqrt(np.mean(np.sum((rig.joints(basis) - joints) ** 2,
+                                             axis=2)[unknown]))
+
+    auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, return_choices=True)
+    assert any(c.corroborated for c in choices)
+    monkeypatch.setattr(bonefill, "CORROBORATE", 0.0)
+    without = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb)
+    base = rmse(basis_matrices(rig, seen, location))
+    print(f"\n07_05, gaps of 15 frames: auto {rmse(auto):.2f} mm, without the pairs "
+          f"{rmse(without):.2f}, interpolation {base:.2f}")
+    assert rmse(auto) < 0.95 * rmse(without) and rmse(auto) < 0.97 * base
 
 
 def test_a_take_too_short_for_copies_stacks_long_gaps_of_several_bones(walk, daz_kb):
