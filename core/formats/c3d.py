@@ -245,12 +245,12 @@ def _read_isolated(path):
             return {k: npz[k] for k in npz.files}
 
 
-def _sweep_stale_reads(now=None):
+def _sweep_stale_reads():
     """Remove the read folders a killed process left behind (a read's own folder goes when it
     ends, but not when its process is killed mid-read): those older than twice
     :data:`READ_TIMEOUT`, which no read still running can be. Folders it may not remove (another
     user's) are left alone."""
-    oldest = (time.time() if now is None else now) - 2 * READ_TIMEOUT
+    oldest = time.time() - 2 * READ_TIMEOUT
     for folder in Path(tempfile.gettempdir()).glob(READ_FOLDER_PREFIX + "*"):
         try:
             stale = folder.is_dir() and folder.stat().st_mtime < oldest
