@@ -131,7 +131,7 @@ AUTO_WARY = 0.1
 #: the rest of the body, the knowledge base) that bear each other out (:meth:`_Job._corroborated`;
 #: chosen on non-test takes, docs/METHOD_NOTES.md, session 57)
 CORROBORATE = 0.5
-CORROBORATED = 0.6
+CORROBORATED = 0.45
 #: ``regress``: the other bones' channels this many seconds either side count too; fitted within
 #: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
 REGRESS_LAGS = (0.05, 0.1)
