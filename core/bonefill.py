@@ -870,13 +870,8 @@ class _Job:
         out = made["interp"].copy()
         for b, a, e in gap_runs(mask):
             w = stacking.frame_weights(table_of(b, a), e - a + 1, self.fps)
-            base = Rotation.from_matrix(out[a:e + 1, b, :3, :3])
-            turn = sum(w[:, k:k + 1] * (Rotation.from_matrix(made[name][a:e + 1, b, :3, :3])
-                                        * base.inv()).as_rotvec()
-                       for k, name in enumerate(fills))
-            out[a:e + 1, b, :3, :3] = (Rotation.from_rotvec(turn) * base).as_matrix()
-            out[a:e + 1, b, :3, 3] = sum(w[:, k:k + 1] * made[name][a:e + 1, b, :3, 3]
-                                         for k, name in enumerate(fills))
+            out[a:e + 1, b] = _about(out[a:e + 1, b], [(made[name][a:e + 1, b], w[:, k:k + 1])
+                                                       for k, name in enumerate(fills)])
         return out
 
     def _errors(self, basis, truth, copies):
@@ -997,8 +992,9 @@ def halfway(start, end, gaps, share=0.5):
 
 def _about(base, parts):
     """Basis matrices (frames, 4, 4): ``base`` turned by the weighted sum of the turns from it
-    to each of ``parts`` ((matrices, weight) pairs; rotation vectors summed, as ``stack`` weighs
-    its fills), located at the weighted sum of the moves from it."""
+    to each of ``parts`` ((matrices, weight) pairs, a weight a number or one per frame, (frames,
+    1); rotation vectors summed), located at the weighted sum of the moves from it: ``stack``'s
+    fills weighed frame by frame, a short gap's share of its fill and of an agreeing pair."""
     origin = Rotation.from_matrix(base[:, :3, :3])
     turn = sum(weight * (Rotation.from_matrix(other[:, :3, :3]) * origin.inv()).as_rotvec()
                for other, weight in parts)
