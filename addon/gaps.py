@@ -312,7 +312,8 @@ def how_filled(choices, bone, first, last):
     the share of the way from it where the fill went part of the way,
     and how far on towards the consensus: the knowledge base's motion and the take's own
     regression, or the regression alone without a knowledge base; on a short gap, the two fills
-    whose mean the part it kept of the interpolation went part of the way to, where they agree)
+    whose mean the part it kept of the interpolation went part of the way to, where they agree,
+    and the share it went to the cubic where the take's copies favour it)
     and the copies' estimate of its error as a share of the interpolation's (the largest where
     several, 0 where none judged it). No error in millimetres: an armature's copies foretell
     the share, not the level (docs/METHOD_NOTES.md, session 34)."""
@@ -327,6 +328,7 @@ def how_filled(choices, bone, first, last):
                  f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
               + (f", the rest {CORROBORATE:.0%} to {c.corroborated}, which agree"
                  if c.corroborated else "")
+              + (f", {c.cubic:.0%} to the cubic, which the take favours" if c.cubic else "")
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0

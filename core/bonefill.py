@@ -132,6 +132,14 @@ AUTO_WARY = 0.1
 #: chosen on non-test takes, docs/METHOD_NOTES.md, session 57)
 CORROBORATE = 0.5
 CORROBORATED = 0.45
+#: and where the take's copies, all of them together, favour the cubic (``hermite``) over the
+#: interpolation - their mean log ratio of its squared joint error to the interpolation's lies
+#: below ``-CUBIC_TRUST`` - the part such a gap kept goes ``min(CUBIC_PULL, -mean -
+#: CUBIC_TRUST)`` of the way on to the cubic: a gap's own few copies judge it against the bar
+#: of :data:`PROMOTE_SHORT`, the take's hundreds tell whether its motion suits the cubic at all
+#: (chosen on non-test takes, docs/METHOD_NOTES.md, session 58)
+CUBIC_TRUST = 0.5
+CUBIC_PULL = 0.5
 #: ``regress``: the other bones' channels this many seconds either side count too; fitted within
 #: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
 REGRESS_LAGS = (0.05, 0.1)
@@ -221,7 +229,9 @@ class GapChoice:
     the fills named in ``towards`` (0: not at all; :data:`CONSENSUS_FILLS`, without a
     knowledge base :data:`TAKE_ALONE_CONSENSUS`, joined by " + "); ``corroborated``: the two
     fills (joined by " + ") whose mean the part of a short gap kept of the interpolation went
-    :data:`CORROBORATE` of the way on to, where they agree on the gap ("": none)."""
+    :data:`CORROBORATE` of the way on to, where they agree on the gap ("": none); ``cubic``: how
+    far the gap went towards the cubic (``hermite``) beside, where the take's copies favour it
+    (:data:`CUBIC_TRUST`; 0: not at all)."""
 
     bone: str
     first: int
@@ -232,6 +242,7 @@ class GapChoice:
     consensus: float = 0.0
     towards: str = ""
     corroborated: str = ""
+    cubic: float = 0.0
 
 
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
@@ -316,11 +327,12 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     estimates = job.estimates or [float("nan")] * len(runs)
     consensus = job.consensus or [0.0] * len(runs)
     corroborated = job.corroborated or [None] * len(runs)
+    cubic = job.cubic or [0.0] * len(runs)
     towards = " + ".join(job.consensus_fills)
     return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate), further,
-                             towards if further else "", " + ".join(pair or ()))
-                   for (b, a, e), (name, share), estimate, further, pair
-                   in zip(runs, choices, estimates, consensus, corroborated)]
+                             towards if further else "", " + ".join(pair or ()), float(pulled))
+                   for (b, a, e), (name, share), estimate, further, pair, pulled
+                   in zip(runs, choices, estimates, consensus, corroborated, cubic)]
 
 
 class _Job:
@@ -338,7 +350,7 @@ class _Job:
         self.own = moves & (rig.roots if rig.lengths is not None else True)
         # auto's choice per gap, its estimate of it from the copies and how far the gap then
         # went on to the long-gap consensus (None: not auto)
-        self.choices = self.estimates = self.consensus = self.corroborated = None
+        self.choices = self.estimates = self.consensus = self.corroborated = self.cubic = None
         # the fills auto stacks, and those its long gaps go on to: without a knowledge base,
         # the take's own
         self.stack_fills, self.long_fills = (
@@ -600,7 +612,9 @@ class _Job:
         of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all), but
         ``stack_long`` in equal parts on gaps of :data:`LONG_STACK` seconds or more
         that gaps of other bones overlap (``match`` sees less of the body there), and
-        interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`). Last,
+        interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`); where
+        all the take's copies together favour the cubic (:data:`CUBIC_TRUST`), the part a
+        short gap kept of the interpolation goes part of the way on to ``hermite``. Last,
         each gap of :data:`LONG_STACK` seconds or more (where ``stack_long`` is made) that
         does not keep the interpolation goes :data:`CONSENSUS` of the way on from its fill to
         the mean of :data:`CONSENSUS_FILLS`, and in a take without copies every other gap of
@@ -632,6 +646,7 @@ class _Job:
                        else names[1], 1.0) for _, a, e in runs]
         estimates = [float("nan")] * len(runs)
         expected = [float("nan")] * len(runs)  # the chosen fill's mean squared joint error
+        pull = 0.0  # how far the kept interpolation of short gaps goes on to the cubic
         longest = [rotations and (e - a + 1) >= LONG_STACK * self.fps
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
@@ -666,6 +681,10 @@ class _Job:
             # log error ratio to interpolation per copy (1 mm^2 per joint and frame keeps still
             # bones at 0); per gap the mean over its copies, shrunk towards the take's mean
             floor = np.array([1e-6 * c[3] * (self.below[c[1]].sum() + 1) for c in copies])
+            if stack:  # how far all the copies together favour the cubic
+                favour = -np.mean(np.log((self._errors(tried["hermite"], truth, copies) + floor)
+                                         / (base + floor)))
+                pull = min(CUBIC_PULL, max(0.0, favour - CUBIC_TRUST))
             owner = np.array([c[0] for c in copies])
             ratio = {}
             for name in names:
@@ -709,6 +728,9 @@ class _Job:
         towards = self.consensus_fills
         agree = CONSENSUS if wanted.any() and set(towards) <= set(made) else 0.0
         self.choices, self.estimates, self.corroborated = choice, estimates, corroborated
+        self.cubic = [pull * (1 - share) if stack and share < 1
+                      and e - a + 1 < LONG_STACK * self.fps else 0.0
+                      for (_, a, e), (_, share) in zip(runs, choice)]
         onward = [agree if last else UNJUDGED_CONSENSUS * bool(agree) if unjudged_gap else 0.0
                   for last, unjudged_gap in zip(longest, unjudged)]
         self.consensus = [on if name != "interp"
@@ -730,16 +752,20 @@ class _Job:
             for name, n in counts.items())
             + (f"; then {onwards}" if onwards else "")
             + (f"; the interpolated part of {pairs} short gaps {CORROBORATE:.0%} of the way on to "
-               "two fills that agree there" if pairs else ""))
+               "two fills that agree there" if pairs else "")
+            + (f"; the interpolated part of the short gaps {pull:.0%} of the way on to the cubic, "
+               "which the take's copies favour" if any(self.cubic) else ""))
         if not wanted.any():
             return seen
         out = seen.copy()
-        for (b, a, e), (name, share), further, pair in zip(runs, choice, self.consensus,
-                                                           corroborated):
+        for (b, a, e), (name, share), further, pair, cubic in zip(
+                runs, choice, self.consensus, corroborated, self.cubic):
             rows = slice(a, e + 1)
-            if pair:  # about the interpolation: the fill's share, the pair's mean on the rest
+            if pair or cubic:  # about the interpolation: the fill's share, on the rest the
+                # pair's mean and the cubic
                 out[rows, b] = _about(seen[rows, b], [(made[name][rows, b], share)] + [
-                    (made[key][rows, b], CORROBORATE * (1 - share) / 2) for key in pair])
+                    (made[key][rows, b], CORROBORATE * (1 - share) / 2) for key in pair or ()]
+                    + [(made["hermite"][rows, b], cubic)])
                 continue
             if name == "interp" or not share:
                 continue
