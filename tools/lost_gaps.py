@@ -14,7 +14,8 @@ about the gapped one move over the gap than over its copies.
                                                    # regress,match: those fills' departure,
                                                    # distance to auto's, error and distances
                                                    # from each other too; LENGTHS=15,30:
-                                                   # only those gap lengths)
+                                                   # only those gap lengths; FURTHER=1: the
+                                                   # 19 further non-test Daz takes instead)
     python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, sessions 38, 52
     python tools/lost_gaps.py --tell OUT.jsonl     # how well each measure known at fill time
                                                    # tells the lost gaps (session 51; a FILLS run)
@@ -36,6 +37,11 @@ from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
 from tune_bones import AMC, AMC_TUNING, DAZ, armature_kb
 
 DAZ_TUNING = "01_08 02_05 03_02 05_10 06_03 07_05 08_02 09_05 10_03 11_01 12_03 13_10".split()
+#: up to two more non-test Daz takes per subject (drawn with seed 58; 03 and 12 have one left,
+#: 11 none): the 12 above showed `auto` kinder against the cubic than unseen takes are
+#: (docs/METHOD_NOTES.md, session 58)
+DAZ_FURTHER = ("01_14 02_04 02_07 03_01 05_19 05_04 06_05 06_15 07_06 07_03 08_09 08_03 09_06 "
+               "09_01 10_05 10_02 12_01 13_32 13_42").split()
 STEPS = np.linspace(0.0, 1.0, 21)
 
 
@@ -43,7 +49,8 @@ def run(out):
     amc = bool(os.environ.get("AMC"))
     full = None if os.environ.get("NO_KB") else armature_kb(amc)
     paths = ([AMC / f"{t}.amc" for t in AMC_TUNING] if amc
-             else [DAZ / t[:2] / f"{t}.bvh.gz" for t in DAZ_TUNING])
+             else [DAZ / t[:2] / f"{t}.bvh.gz"
+                   for t in (DAZ_FURTHER if os.environ.get("FURTHER") else DAZ_TUNING)])
     only = os.environ.get("TAKES")
     lengths = [int(x) for x in os.environ.get("LENGTHS", "").split(",") if x]
     paths = [p for p in paths if not only or any(t in p.name for t in only.split(","))]
