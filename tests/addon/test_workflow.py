@@ -103,6 +103,24 @@ def test_a_marker_gap_names_every_estimate_blended_into_it(extension):
     assert how == "rigid partners 40%, spline 34%, partner's pattern 25%" and expected == 3.0
 
 
+def test_an_armature_gap_names_the_fills_it_went_to(extension):
+    """The gap list's words for a bone's gaps: a share of a fill, the rest to an agreeing pair
+    and to the cubic the take's copies favour; the interpolation kept where nothing moved it."""
+    from mocap_gapfill.core.bonefill import GapChoice
+
+    _, _, gaps, _ = modules()
+    choices = [GapChoice("lShldr", 10, 24, "mix", 0.5, 0.6, corroborated="hermite + regress",
+                         cubic=0.15),
+               GapChoice("lShldr", 40, 54, "interp", 0.0, cubic=0.25),
+               GapChoice("lShldr", 70, 84, "interp", 0.0)]
+    assert gaps.how_filled(choices, "lShldr", 10, 24)[:2] == (
+        "mix (50% of the way), the rest 50% to hermite + regress, which agree, 15% to the "
+        "cubic, which the take favours", 0.6)
+    assert gaps.how_filled(choices, "lShldr", 40, 54)[0] == (
+        "interp, 25% to the cubic, which the take favours")
+    assert gaps.how_filled(choices, "lShldr", 70, 84)[0] == "interp"
+
+
 def test_blend_run_names_the_marker_gaps_to_review_first(scene, data_dir, marker_kb, tmp_path):
     """What ``blend`` / ``blender -b -c mocap_gapfill`` hands the batch report for a marker
     scene: the largest error the gaps' copies expect and the gaps to review first."""
