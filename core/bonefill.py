@@ -363,6 +363,11 @@ class _Job:
         """(joints,) bool: the joints bone ``b`` moves (below it, and its own where it moves)."""
         return self.below[b] | (self.own & (np.arange(len(self.own)) == b))
 
+    def short(self, a, e):
+        """Whether a gap over frames ``a``-``e`` is shorter than :data:`LONG_STACK` seconds:
+        ``auto`` doubts, corroborates and pulls such gaps; longer ones it stacks."""
+        return e - a + 1 < LONG_STACK * self.fps
+
     def unknown(self, gaps):
         """(frames, joints) joints the gaps leave unknown."""
         return (gaps.astype(np.int64) @ self.below.astype(np.int64) > 0) | (gaps & self.own)
@@ -647,7 +652,7 @@ class _Job:
         estimates = [float("nan")] * len(runs)
         expected = [float("nan")] * len(runs)  # the chosen fill's mean squared joint error
         pull = 0.0  # how far the kept interpolation of short gaps goes on to the cubic
-        longest = [rotations and (e - a + 1) >= LONG_STACK * self.fps
+        longest = [rotations and not self.short(a, e)
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
         # in a take without copies, a long gap match fills unjudged goes on to the consensus
@@ -710,7 +715,7 @@ class _Job:
                                        * np.mean(np.sqrt(base[own] / samples[own]))) ** 2
         wanted = np.zeros_like(gaps)
         for (b, a, e), (name, _) in zip(runs, choice):  # a short gap may take a pair's mean
-            wanted[a:e + 1, b] = name != "interp" or (stack and e - a + 1 < LONG_STACK * self.fps)
+            wanted[a:e + 1, b] = name != "interp" or (stack and self.short(a, e))
         corroborated = [None] * len(runs)
         if wanted.any():
             made = self.candidates(channels, location, wanted,
@@ -728,8 +733,7 @@ class _Job:
         towards = self.consensus_fills
         agree = CONSENSUS if wanted.any() and set(towards) <= set(made) else 0.0
         self.choices, self.estimates, self.corroborated = choice, estimates, corroborated
-        self.cubic = [pull * (1 - share) if stack and share < 1
-                      and e - a + 1 < LONG_STACK * self.fps else 0.0
+        self.cubic = [pull * (1 - share) if share < 1 and self.short(a, e) else 0.0
                       for (_, a, e), (_, share) in zip(runs, choice)]
         onward = [agree if last else UNJUDGED_CONSENSUS * bool(agree) if unjudged_gap else 0.0
                   for last, unjudged_gap in zip(longest, unjudged)]
@@ -819,7 +823,7 @@ class _Job:
         gaps the fill lost, docs/METHOD_NOTES.md, sessions 38 and 50). Longer gaps keep their
         fill."""
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (name, _)) in enumerate(zip(runs, choice))
-                 if name != "interp" and e - a + 1 < LONG_STACK * self.fps]
+                 if name != "interp" and self.short(a, e)]
         if not spans:
             return choice
         worlds = {key: self._spans(made[key], spans)
@@ -849,7 +853,7 @@ class _Job:
         non-test takes, docs/METHOD_NOTES.md, session 57). None elsewhere."""
         fills = [f for f in self.stack_fills if f != "interp"]
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (_, share)) in enumerate(zip(runs, choice))
-                 if share < 1 and e - a + 1 < LONG_STACK * self.fps and self.moved_by(b).any()]
+                 if share < 1 and self.short(a, e) and self.moved_by(b).any()]
         out = [None] * len(runs)
         if not spans or len(fills) < 2:
             return out
