@@ -3,7 +3,7 @@ protocol's gaps on the tuning takes of ``tools/tune_bones.py`` (never a test tak
 out of a knowledge base that holds no test take), filled by ``auto``; per gap how it was filled
 (:class:`~mocap_gapfill.core.bonefill.GapChoice`), how far it moved the joints from Blender's
 interpolation, the interpolation's error on the gap's copies (the copies ``auto`` judges by), the
-joint speed at the gap's keys, and the error of the fill moved ``t`` = 0, 0.05, ..., 1 of the way
+joint speed at the gap's keys (and, session 59, at its copies' keys), and the error of the fill moved ``t`` = 0, 0.05, ..., 1 of the way
 from the interpolation's joints to its own (t = 1: the fill; linear in the joints), so that a
 veto or cap can be scored without filling again; and (session 41) how much calmer the bones
 about the gapped one move over the gap than over its copies.
@@ -95,8 +95,9 @@ def run(out):
                     own = [c for c in copies if c[0] == i]
                     copy_mm = [1000 * _rms(on_copies[c[2]:c[2] + c[3], joints]
                                            - truth[c[2]:c[2] + c[3], joints]) for c in own]
-                    speed = [1000 * _rms(shown[k + 1, joints] - shown[k, joints])
-                             for k in (a - 2, e + 1) if k >= 0 and k + 1 < len(shown)]
+                    speed = _key_speed(shown, joints, a, e)
+                    copy_speed = [np.mean(_key_speed(shown, joints, c[2], c[2] + c[3] - 1))
+                                  for c in own]
                     sink.write(json.dumps({
                         "take": path.name, "setting": label, "l": l, "bone": rig.names[b],
                         "first": int(a), "frames": int(e - a + 1), "joints": int(joints.sum()),
@@ -113,6 +114,8 @@ def run(out):
                                      for k, x in enumerate(others) for y in list(others)[k + 1:]},
                         "copies_interp_mm": float(np.mean(copy_mm)) if copy_mm else None,
                         "key_speed_mm": float(np.mean(speed)) if speed else None,
+                        "copies_key_speed_mm": (float(np.mean(copy_speed)) if copy_speed
+                                                else None),
                         "curve_mm": [1000 * _rms(s + step * (f - s) - t) for step in STEPS],
                         # how much calmer the bones about the gapped one are over the gap
                         # than over its copies (log ratio of their departure from a line)
@@ -156,6 +159,13 @@ def _off_line(rig, channels, gaps, start, length):
     out = np.sqrt(np.mean(angle ** 2, axis=0))
     out[rig.roots | gaps[start:start + length].any(axis=0)] = np.nan
     return out
+
+
+def _key_speed(world, joints, a, e):
+    """The joints' speed (RMS over them, mm per frame) at the keys either side of frames
+    ``a``-``e`` (those inside the clip)."""
+    return [1000 * _rms(world[k + 1, joints] - world[k, joints])
+            for k in (a - 2, e + 1) if k >= 0 and k + 1 < len(world)]
 
 
 def _rms(x):
