@@ -3,10 +3,11 @@ protocol's gaps on the tuning takes of ``tools/tune_bones.py`` (never a test tak
 out of a knowledge base that holds no test take), filled by ``auto``; per gap how it was filled
 (:class:`~mocap_gapfill.core.bonefill.GapChoice`), how far it moved the joints from Blender's
 interpolation, the interpolation's error on the gap's copies (the copies ``auto`` judges by), the
-joint speed at the gap's keys (and, session 59, at its copies' keys), and the error of the fill moved ``t`` = 0, 0.05, ..., 1 of the way
-from the interpolation's joints to its own (t = 1: the fill; linear in the joints), so that a
-veto or cap can be scored without filling again; and (session 41) how much calmer the bones
-about the gapped one move over the gap than over its copies.
+joint speed at the gap's keys (and, session 59, at its copies' keys), and the error of the fill
+moved ``t`` = 0, 0.05, ..., 1 of the way from the interpolation's joints to its own (t = 1: the
+fill; linear in the joints), so that a veto or cap can be scored without filling again; and
+(session 41) how much calmer the bones about the gapped one move over the gap than over its
+copies.
 
     python tools/lost_gaps.py OUT.jsonl            # run (the Daz tuning takes; AMC=1: ASF/AMC;
                                                    # TAKES=01_08,02_05: only those; NO_KB=1:
