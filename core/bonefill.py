@@ -7,9 +7,10 @@ F-curve interpolation of the keys either side (``interp``): free and often good.
 starts from the keys and changes only the gapped bones' rotations (and locations) on the gap
 frames:
 
-- ``hermite`` (a baseline: Bezier keys on Blender's F-curves): each channel a cubic from the key
+- ``hermite`` (a baseline: a cubic on Blender's F-curves): each channel a cubic from the key
   before the gap to the key after it, leaving and arriving with the velocities the keys show
-  (damped on gaps over ``HERMITE_SECONDS``). The fills of the project's own (``auto``'s
+  (damped on gaps over ``HERMITE_SECONDS``); closer to the motion on short gaps than the curve
+  Blender draws through Bezier keys with its default handles (``tools/blender_bezier.py``). The fills of the project's own (``auto``'s
   candidates, ``knn``'s start) take the same cubic on the rotations instead of their Euler
   channels, which race near gimbal lock (:func:`~.rig.hermite_rotations`);
 - ``match``: motion matching in rotation space (:func:`~.matching.match_windows`): the
@@ -555,7 +556,7 @@ class _Job:
     def hermite(self, channels, location, gaps, base, on_channels=False):
         """``hermite``'s basis matrices; ``base``: those of ``channels`` and ``location``. The
         cubic turns the rotations (:func:`~.rig.hermite_rotations`); ``on_channels``: each
-        rotation channel a cubic of its own, as Bezier keys on Blender's F-curves would do it
+        rotation channel a cubic of its own, as a cubic on Blender's F-curves would do it
         (the baseline, which near gimbal lock swings a bone by radians)."""
         moving = gaps & self.moves
         damping = HERMITE_SECONDS * self.fps
