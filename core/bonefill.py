@@ -10,9 +10,10 @@ frames:
 - ``hermite`` (a baseline: a cubic on Blender's F-curves): each channel a cubic from the key
   before the gap to the key after it, leaving and arriving with the velocities the keys show
   (damped on gaps over ``HERMITE_SECONDS``); closer to the motion on short gaps than the curve
-  Blender draws through Bezier keys with its default handles (``tools/blender_bezier.py``). The fills of the project's own (``auto``'s
-  candidates, ``knn``'s start) take the same cubic on the rotations instead of their Euler
-  channels, which race near gimbal lock (:func:`~.rig.hermite_rotations`);
+  Blender draws through Bezier keys with its default handles (``tools/blender_bezier.py``).
+  The fills of the project's own (``auto``'s candidates, ``knn``'s start) take the same cubic
+  on the rotations instead of their Euler channels, which race near gimbal lock
+  (:func:`~.rig.hermite_rotations`);
 - ``match``: motion matching in rotation space (:func:`~.matching.match_windows`): the
   knowledge-base windows of consecutive poses whose bone rotations move most like the take's
   over the gap and half a second either side (where the gapped bones are keyed too), matched

@@ -30,8 +30,9 @@ from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
 
 def blender_bezier(values, gaps):
     """``values`` (frames, bones, k) with each gap's frames (``gaps`` (frames, bones) bool) as a
-    Blender F-curve per bone and channel, keyed on every other frame with Bezier keys of the
-    default handles and smoothing, evaluates there (held at clip ends, as Blender does)."""
+    Blender F-curve per bone and channel, keyed on every frame outside its gaps with Bezier keys
+    of the default handles and smoothing, evaluates there (held at clip ends, as Blender
+    does)."""
     import bpy
 
     from mocap_gapfill.addon import compat
