@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from mocap_gapfill.core.bonefill import fill_bones
-from mocap_gapfill.core.evaluate import bone_errors, punch_bone_gaps
+from mocap_gapfill.core.evaluate import BONE_SETTINGS, bone_errors, punch_bone_gaps
 from mocap_gapfill.core.io import read_rig_take
 from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
 
@@ -83,9 +83,10 @@ def main():
     for test in run["tests"]:
         rig, channels, location, fps = read_rig_take(test, args.skip_frames)
         truth = basis_matrices(rig, channels, location)
-        for setting in sorted({r["setting"] for r in run["results"]},
-                              key=lambda s: tuple(int(x.split("=")[1]) for x in s.split(","))):
-            n, l = (int(x.split("=")[1]) for x in setting.split(","))
+        for n, l in BONE_SETTINGS:  # those of the run, in the protocol's order
+            setting = f"n={n},l={l}"
+            if (Path(test).name, setting, default) not in theirs:
+                continue
             gaps = punch_bone_gaps(rig, len(channels), (n, l), run["seed"])
             seen = interpolate_channels(channels, gaps)
             interp = bone_errors(rig, basis_matrices(rig, seen, location), truth, gaps)
