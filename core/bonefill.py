@@ -7,10 +7,13 @@ F-curve interpolation of the keys either side (``interp``): free and often good.
 starts from the keys and changes only the gapped bones' rotations (and locations) on the gap
 frames:
 
+- ``bezier`` (a baseline: one click in the Graph Editor, Key > Interpolation Mode > Bezier):
+  the curve Blender draws across the gap once the keys are Bezier, with the handles and
+  smoothing it gives new keys by default (:func:`~.rig.bezier_channels`);
 - ``hermite`` (a baseline: a cubic on Blender's F-curves): each channel a cubic from the key
   before the gap to the key after it, leaving and arriving with the velocities the keys show
-  (damped on gaps over ``HERMITE_SECONDS``); closer to the motion on short gaps than the curve
-  Blender draws through Bezier keys with its default handles (``tools/blender_bezier.py``).
+  (damped on gaps over ``HERMITE_SECONDS``); closer to the motion on short gaps than
+  ``bezier``, whose handles level out at every turn of a curve (docs/EVALUATION.md).
   The fills of the project's own (``auto``'s candidates, ``knn``'s start) take the same cubic
   on the rotations instead of their Euler channels, which race near gimbal lock
   (:func:`~.rig.hermite_rotations`);
@@ -78,13 +81,15 @@ from .kb import match_names
 from .motion import Motion, blend_into_gaps, gap_runs, skeleton_limbs, widened
 from .posing import best_rotation, child_handles, forward, gram_schmidt, order_bones, \
     rotation_between, solve_pose, tail_handles
-from .rig import aligned_turns, basis_matrices, basis_turns, hermite_channels, \
-    hermite_rotations, interpolate_channels, regress_channels
+from .rig import aligned_turns, basis_matrices, basis_turns, bezier_channels, \
+    hermite_channels, hermite_rotations, interpolate_channels, regress_channels
 from . import stacking
 
-BONE_METHODS = ("auto", "knn", "match", "regress", "interp", "hermite", "slerp", "positions")
-#: the methods that are not the project's own (``interp`` is Blender's own interpolation)
-BONE_BASELINES = ("interp", "hermite", "slerp")
+BONE_METHODS = ("auto", "knn", "match", "regress", "interp", "bezier", "hermite", "slerp",
+                "positions")
+#: the methods that are not the project's own (``interp`` and ``bezier`` are Blender's own
+#: curves through LINEAR and Bezier keys)
+BONE_BASELINES = ("interp", "bezier", "hermite", "slerp")
 #: every candidate a gap can take (``half``: half-way from ``interp`` to ``knn``; ``recall``:
 #: the subtree carried onto the knowledge base's guess from the known joints alone; ``mix``:
 #: :data:`MIX_SHARE` of the way from ``hermite`` to ``match``)
@@ -310,6 +315,9 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
         basis = seen
     elif method == "slerp":
         basis = _slerp(seen, gaps, moves)
+    elif method == "bezier":
+        basis = basis_matrices(rig, bezier_channels(channels, gaps),
+                               bezier_channels(location, gaps & moves), seen, gaps.any(axis=0))
     elif method == "hermite":
         basis = job.hermite(channels, location, gaps, seen, on_channels=True)
     elif method == "regress":

@@ -341,6 +341,108 @@ def hermite_channels(values, gaps, damping=None):
     return out
 
 
+def bezier_channels(values, gaps):
+    """Like :func:`interpolate_channels`, but each gap as Blender draws it once the keys either
+    side are Bezier (Key > Interpolation Mode > Bezier) with the handles and smoothing new keys
+    and F-curves get by default (4.2-5.2): ``AUTO_CLAMPED`` handles, a key at a turning point of
+    the curve (or at its ends) level, and ``Continuous Acceleration``, the handles of each run of
+    keys between two such keys chosen together so that the curve's second derivative is
+    continuous at every key, within limits that keep each handle from overshooting the next
+    key's value or pointing back (Blender's ``BKE_nurb_handle_smooth_fcurve``). One F-curve per
+    bone and channel, keyed on every frame outside its gaps; held at clip ends. Agrees with
+    Blender's own curves to float precision (tests/addon)."""
+    out = np.array(values, dtype=float)
+    frames = np.arange(len(out))
+    for b in np.flatnonzero(gaps.any(axis=0)):
+        keyed = np.flatnonzero(~gaps[:, b])
+        if len(keyed) == 0:
+            continue
+        out[:keyed[0], b] = out[keyed[0], b]
+        out[keyed[-1] + 1:, b] = out[keyed[-1], b]
+        for k in range(out.shape[2]):
+            y = out[keyed, b, k]
+            turning = np.ones(len(y), dtype=bool)  # level handles: the ends, turning points
+            before, after = y[:-2] - y[1:-1], y[2:] - y[1:-1]
+            turning[1:-1] = ((before <= 0) & (after <= 0)) | ((before >= 0) & (after >= 0))
+            locks = np.flatnonzero(turning)
+            for p in np.flatnonzero(np.diff(keyed) > 1):  # the key before a gap
+                s = locks[np.searchsorted(locks, p, side="right") - 1]
+                e = locks[np.searchsorted(locks, p + 1)]
+                h, l = _smooth_handles(keyed[s:e + 1], y[s:e + 1])
+                right, left = h[p - s], -h[p + 1 - s] / l[p + 1 - s]
+                t = ((frames[keyed[p] + 1:keyed[p + 1]] - keyed[p]) / (keyed[p + 1] - keyed[p]))
+                u = 1 - t
+                out[keyed[p] + 1:keyed[p + 1], b, k] = (
+                    u ** 3 * y[p] + 3 * u * u * t * (y[p] + right)
+                    + 3 * u * t * t * (y[p + 1] + left) + t ** 3 * y[p + 1])
+    return out
+
+
+def _smooth_handles(x, y):
+    """The right handles' heights over their keys (``h``; the left ones are ``-h / l``) of a
+    run of auto-clamped Bezier keys ``(x, y)`` whose first and last keys are level, as
+    Blender's ``Continuous Acceleration`` solves them: a tridiagonal system (the curve's second
+    derivative continuous at each inner key), each handle within what keeps it from pointing
+    back or overshooting the next key's value, out-of-range handles locked at their limit and
+    released (at most twice each) when the solution pulls them back in."""
+    n = len(x)
+    h, l = np.zeros(n), np.ones(n)
+    if n < 3:
+        return h, l
+    dx, dy = np.r_[np.nan, np.diff(x)], np.r_[np.nan, np.diff(y)]
+    l[1:-1] = dx[2:] / dx[1:-1]
+    low, high = np.full(n, -np.inf), np.full(n, np.inf)
+    for i, limit in [(i - 1, dy[i]) for i in range(1, n)] + [(i, dy[i] * l[i])
+                                                             for i in range(1, n)]:
+        if limit >= 0:
+            high[i], low[i] = min(high[i], limit), 0.0
+        if limit <= 0:
+            high[i], low[i] = 0.0, max(low[i], limit)
+    below, diag, above = np.zeros(n), np.ones(n), np.zeros(n)  # the ends: level (h = 0)
+    rhs = np.zeros(n)
+    below[1:-1], diag[1:-1] = l[1:-1] ** 2, 2 * (l[1:-1] + 1)
+    above[1:-1], rhs[1:-1] = 1 / l[2:], dy[1:-1] * l[1:-1] ** 2 + dy[2:]
+    system = below, diag, above, rhs
+    wanted = [part.copy() for part in system]
+    fixed, released = np.zeros(n, dtype=bool), np.zeros(n, dtype=int)
+    while True:
+        h = _tridiagonal(*system)
+        out = (h < low) | (h > high)
+        target = np.where(h > high, high, low)
+        lock = out & (target != 0)  # first those that go the right way, if any
+        if out.any() and not lock.any():
+            lock = out
+        for part, value in zip(system, (0.0, 1.0, 0.0, target)):
+            part[lock] = value[lock] if isinstance(value, np.ndarray) else value
+        fixed |= lock
+        if lock.any():
+            continue
+        pull = -(wanted[0] * np.r_[h[-1], h[:-1]] + wanted[1] * h
+                 + wanted[2] * np.r_[h[1:], h[0]] - wanted[3]) * wanted[1]
+        free = fixed & (released < 2) & (((pull > 0) & (h < high)) | ((pull < 0) & (h > low)))
+        if not free.any():
+            return h, l
+        for part, value in zip(system, wanted):
+            part[free] = value[free]
+        fixed &= ~free
+        released += free
+
+
+def _tridiagonal(below, diag, above, rhs):
+    """Solve the tridiagonal system (``below[0]`` and ``above[-1]`` unused)."""
+    n = len(diag)
+    c, d = np.zeros(n), np.zeros(n)
+    c[0], d[0] = above[0] / diag[0], rhs[0] / diag[0]
+    for i in range(1, n):
+        m = diag[i] - below[i] * c[i - 1]
+        c[i], d[i] = above[i] / m, (rhs[i] - below[i] * d[i - 1]) / m
+    x = np.zeros(n)
+    x[-1] = d[-1]
+    for i in range(n - 2, -1, -1):
+        x[i] = d[i] - c[i] * x[i + 1]
+    return x
+
+
 def _cubic_spans(gaps, damping):
     """Each gap the cubics fill (two keys on both sides): ``(bone, first, last, s, span,
     scale)``, ``s`` (frames, 1) its frames' place between the keys either side (0-1), ``span``

@@ -17,8 +17,8 @@ from mocap_gapfill.core.io import read_motion, read_rig_basis, read_rig_take
 from mocap_gapfill.core.kb import build_kb, load_kb
 from mocap_gapfill.core.matching import match_windows
 from mocap_gapfill.core.motion import gap_runs, y_up_to_z_up
-from mocap_gapfill.core.rig import (Rig, aligned_turns, basis_matrices, bone_ends, channels_of,
-                                    hermite_channels, hermite_rotations, interpolate_channels,
+from mocap_gapfill.core.rig import (Rig, aligned_turns, basis_matrices, bezier_channels,
+                                    bone_ends, channels_of, hermite_channels, hermite_rotations, interpolate_channels,
                                     regress_channels, rotations)
 
 WALK = "cmu/bvh/daz_friendly/07/07_05.bvh.gz"
@@ -343,6 +343,23 @@ def test_hermite_follows_the_velocities_at_the_keys():
     damped = hermite_channels(values, gaps, damping=2)  # end velocities scaled by 2/11
     v0 = (damped[15] - damped[14]) / (values[14] - values[13])
     assert np.all(np.abs(v0) < 0.5)  # leaves the key far slower than the motion did
+
+
+def test_bezier_levels_out_at_turns_and_keeps_a_line_straight():
+    """Blender's Bezier keys (checked against Blender itself in tests/addon): a line far from
+    the curve's ends stays a line; a key at a turn of the curve has level handles, so a gap
+    from a peak to a trough is the smoothstep between them; held at clip ends; the keys
+    untouched."""
+    t = np.arange(200.0)
+    values = np.stack([2 * t, np.cos(np.pi * t / 40)], axis=1)[:, None, :]  # (200, 1, 2)
+    gaps = np.zeros((200, 1), bool)
+    gaps[81:120] = gaps[:5] = gaps[190:] = True  # cos: a peak at 80, a trough at 120
+    out = bezier_channels(values, gaps)
+    assert np.array_equal(out[~gaps], values[~gaps])
+    assert np.abs(out[81:120, 0, 0] - values[81:120, 0, 0]).max() < 1e-9
+    assert np.all(out[:5, 0] == values[5, 0]) and np.all(out[190:, 0] == values[189, 0])
+    s = np.linspace(0, 1, 41)  # level handles at both keys: the smoothstep from 1 to -1
+    assert np.abs(out[80:121, 0, 1] - (1 - 2 * (3 * s ** 2 - 2 * s ** 3))).max() < 1e-12
 
 
 def test_the_cubic_turns_the_bone_not_its_channels_near_gimbal_lock(data_dir, walk):

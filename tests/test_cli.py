@@ -359,8 +359,8 @@ def test_demo_is_the_main_job(tmp_path):
     # keeps each bone's rotation, against what Blender shows across the deleted keys
     bones = {method: float(value) for method, value in re.findall(
         r"^\s+(\w+)\s+RMSE over the joints the gapped bones move\s+([\d.]+) mm", r.stdout, re.M)}
-    assert set(bones) == {"auto", "interp", "hermite", "slerp"}, r.stdout
-    assert bones["auto"] < 0.2 * min(bones["interp"], bones["hermite"], bones["slerp"])
+    assert set(bones) == {"auto", "interp", "bezier", "hermite", "slerp"}, r.stdout
+    assert bones["auto"] < 0.2 * min(bones[m] for m in ("interp", "bezier", "hermite", "slerp"))
     assert "holds no bone rotations" not in r.stdout
     assert load_kb(tmp_path / "kb_skeleton.npz").turns is not None
     markers = {method: float(value) for method, value in re.findall(
@@ -372,9 +372,10 @@ def test_demo_is_the_main_job(tmp_path):
     real = re.search(r"RMSE over them: auto ([\d.]+) mm, rigid ([\d.]+) mm, linear ([\d.]+) mm",
                      r.stdout)
     assert real and float(real[1]) < min(float(real[2]), 0.5 * float(real[3])), r.stdout
-    real_armature = re.search(r"RMSE: auto ([\d.]+) mm, Blender's own interpolation ([\d.]+) mm",
-                              r.stdout)
-    assert real_armature and float(real_armature[1]) < float(real_armature[2]), r.stdout
+    real_armature = re.search(r"RMSE: auto ([\d.]+) mm, Blender's own interpolation ([\d.]+) mm "
+                              r"\(its curves through Bezier keys ([\d.]+) mm\)", r.stdout)
+    assert real_armature and float(real_armature[1]) < min(float(real_armature[2]),
+                                                           float(real_armature[3])), r.stdout
     assert "filled 30 samples" in r.stdout  # 01_01's real gap: RBAC's last 30 frames
     for name in ("kb_skeleton.npz", "kb_markers.npz", "demo_markers.svg",
                  "demo_markers_filled.c3d", "01_01_filled.c3d"):
