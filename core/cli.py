@@ -400,9 +400,9 @@ def build_parser(extra=None):
                         "gone together for 3-60 frames per 120; "
                         "realgaps: the gaps of real captures (--gap-sources) on complete takes; "
                         "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
-                        "rate; methods auto, knn, match, regress, interp, hermite, slerp, "
-                        "positions; bone-ends: the same, bones keyless for the first or last "
-                        "15-240 frames")
+                        "rate; methods auto, knn, match, regress, interp, bezier, hermite, "
+                        "slerp, positions; bone-ends: the same, bones keyless for the first or "
+                        "last 15-240 frames")
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")
     p.add_argument("--kb-sources", nargs="+", default=[], metavar="PATH",
                    help="knowledge-base files/folders (the test subject is left out)")

@@ -18,8 +18,8 @@ from mocap_gapfill.core.kb import build_kb, load_kb
 from mocap_gapfill.core.matching import match_windows
 from mocap_gapfill.core.motion import gap_runs, y_up_to_z_up
 from mocap_gapfill.core.rig import (Rig, aligned_turns, basis_matrices, bezier_channels,
-                                    bone_ends, channels_of, hermite_channels, hermite_rotations, interpolate_channels,
-                                    regress_channels, rotations)
+                                    bone_ends, channels_of, hermite_channels, hermite_rotations,
+                                    interpolate_channels, regress_channels, rotations)
 
 WALK = "cmu/bvh/daz_friendly/07/07_05.bvh.gz"
 
