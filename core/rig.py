@@ -23,6 +23,7 @@ importer gives the same file (checked against the bpy module in tests/addon).
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import solve_banded
 from scipy.spatial.transform import Rotation
 
 from .errors import GapFillError
@@ -370,7 +371,7 @@ def bezier_channels(values, gaps):
                 e = locks[np.searchsorted(locks, p + 1)]
                 h, l = _smooth_handles(keyed[s:e + 1], y[s:e + 1])
                 right, left = h[p - s], -h[p + 1 - s] / l[p + 1 - s]
-                t = ((frames[keyed[p] + 1:keyed[p + 1]] - keyed[p]) / (keyed[p + 1] - keyed[p]))
+                t = (frames[keyed[p] + 1:keyed[p + 1]] - keyed[p]) / (keyed[p + 1] - keyed[p])
                 u = 1 - t
                 out[keyed[p] + 1:keyed[p + 1], b, k] = (
                     u ** 3 * y[p] + 3 * u * u * t * (y[p] + right)
@@ -402,45 +403,30 @@ def _smooth_handles(x, y):
     rhs = np.zeros(n)
     below[1:-1], diag[1:-1] = l[1:-1] ** 2, 2 * (l[1:-1] + 1)
     above[1:-1], rhs[1:-1] = 1 / l[2:], dy[1:-1] * l[1:-1] ** 2 + dy[2:]
-    system = below, diag, above, rhs
-    wanted = [part.copy() for part in system]
+    wanted = below.copy(), diag.copy(), above.copy(), rhs.copy()
     fixed, released = np.zeros(n, dtype=bool), np.zeros(n, dtype=int)
     while True:
-        h = _tridiagonal(*system)
-        out = (h < low) | (h > high)
+        h = solve_banded((1, 1), np.array([np.r_[0, above[:-1]], diag, np.r_[below[1:], 0]]),
+                         rhs)
+        h[fixed] = rhs[fixed]  # exactly at their limit: each lock is final until released
+        out = ~fixed & ((h < low) | (h > high))
         target = np.where(h > high, high, low)
         lock = out & (target != 0)  # first those that go the right way, if any
         if out.any() and not lock.any():
             lock = out
-        for part, value in zip(system, (0.0, 1.0, 0.0, target)):
-            part[lock] = value[lock] if isinstance(value, np.ndarray) else value
-        fixed |= lock
-        if lock.any():
+        if lock.any():  # held at their limit: solved again
+            below[lock], diag[lock], above[lock], rhs[lock] = 0.0, 1.0, 0.0, target[lock]
+            fixed |= lock
             continue
-        pull = -(wanted[0] * np.r_[h[-1], h[:-1]] + wanted[1] * h
-                 + wanted[2] * np.r_[h[1:], h[0]] - wanted[3]) * wanted[1]
+        pull = -(wanted[0] * np.r_[0, h[:-1]] + wanted[1] * h + wanted[2] * np.r_[h[1:], 0]
+                 - wanted[3]) * wanted[1]
         free = fixed & (released < 2) & (((pull > 0) & (h < high)) | ((pull < 0) & (h > low)))
         if not free.any():
             return h, l
-        for part, value in zip(system, wanted):
+        for part, value in zip((below, diag, above, rhs), wanted):
             part[free] = value[free]
         fixed &= ~free
         released += free
-
-
-def _tridiagonal(below, diag, above, rhs):
-    """Solve the tridiagonal system (``below[0]`` and ``above[-1]`` unused)."""
-    n = len(diag)
-    c, d = np.zeros(n), np.zeros(n)
-    c[0], d[0] = above[0] / diag[0], rhs[0] / diag[0]
-    for i in range(1, n):
-        m = diag[i] - below[i] * c[i - 1]
-        c[i], d[i] = above[i] / m, (rhs[i] - below[i] * d[i - 1]) / m
-    x = np.zeros(n)
-    x[-1] = d[-1]
-    for i in range(n - 2, -1, -1):
-        x[i] = d[i] - c[i] * x[i + 1]
-    return x
 
 
 def _cubic_spans(gaps, damping):
