@@ -85,10 +85,10 @@ $MG evaluate --protocol bursts --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
 $MG evaluate --protocol bursts --quiet --fps 120 --no-kb --methods auto rigid pattern spline \
   --test "$D/cmu/c3d/85_02.c3d" "${HDM05[@]}" --json docs/results/bursts_no_kb.json
 # the same gaps without a knowledge base (a rig no starter one fits): auto from the take alone
-$MG evaluate --protocol bones --quiet --skip-frames 6 --no-kb --methods interp auto \
+$MG evaluate --protocol bones --quiet --skip-frames 6 --no-kb --methods interp bezier auto \
   --test "${BVH43[@]}" \
   --json docs/results/bones_bvh43_no_kb.json
-$MG evaluate --protocol bones --quiet --no-kb --methods interp auto \
+$MG evaluate --protocol bones --quiet --no-kb --methods interp bezier auto \
   --test "${AMC31[@]}" \
   --json docs/results/bones_amc31_no_kb.json
 $MG evaluate --protocol markers --quiet --fps 120 --no-kb --methods auto rigid pattern \
