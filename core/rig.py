@@ -365,11 +365,13 @@ def bezier_channels(values, gaps):
             turning = np.ones(len(y), dtype=bool)  # level handles: the ends, turning points
             before, after = y[:-2] - y[1:-1], y[2:] - y[1:-1]
             turning[1:-1] = ((before <= 0) & (after <= 0)) | ((before >= 0) & (after >= 0))
-            locks = np.flatnonzero(turning)
+            locks, runs = np.flatnonzero(turning), {}
             for p in np.flatnonzero(np.diff(keyed) > 1):  # the key before a gap
                 s = locks[np.searchsorted(locks, p, side="right") - 1]
                 e = locks[np.searchsorted(locks, p + 1)]
-                h, l = _smooth_handles(keyed[s:e + 1], y[s:e + 1])
+                if (s, e) not in runs:  # a run of keys between level ones: solved once
+                    runs[s, e] = _smooth_handles(keyed[s:e + 1], y[s:e + 1])
+                h, l = runs[s, e]
                 right, left = h[p - s], -h[p + 1 - s] / l[p + 1 - s]
                 t = (frames[keyed[p] + 1:keyed[p + 1]] - keyed[p]) / (keyed[p + 1] - keyed[p])
                 u = 1 - t
