@@ -5,7 +5,7 @@ builds it) with 10 bone gaps of 30-120 frames on limb and spine bones; knowledge
 other Daz-friendly subject at 60 fps (about 48k poses, with bone rotations). Times the default
 fill (``auto``: copies of each gap refilled by ``match``, ``mix`` and ``stack``, then the chosen
 one on the gaps), ``match``, ``regress`` and ``knn`` alone, with ``slerp`` in the same run as the
-baseline (what interpolating costs).
+baseline (what interpolating costs) and ``bezier`` (Blender's curves through Bezier keys).
 
 Usage: OMP_NUM_THREADS=2 .venv/bin/python tools/bench_bones.py [--repeat 3]
 [--device auto|numpy|cpu|cuda]
@@ -52,7 +52,7 @@ def main():
     print(f"take: {len(channels)} frames, {len(rig.names)} bones, {int(gaps.sum())} gap frames "
           f"on {len(bones)} gaps; KB {kb.size} poses; device {args.device}")
     times = {}
-    for method in ("slerp", "regress", "match", "knn", "auto"):
+    for method in ("slerp", "bezier", "regress", "match", "knn", "auto"):
         runs = []
         for _ in range(args.repeat):
             start = time.perf_counter()
@@ -62,7 +62,8 @@ def main():
         times[method] = statistics.median(runs)
         print(f"{method:6s} median {times[method]:7.3f} s over {args.repeat} runs "
               f"({', '.join(f'{r:.2f}' for r in runs)})")
-    print(f"auto / match: {times['auto'] / times['match']:.2f}x; target: auto < 10 s")
+    print(f"auto / match: {times['auto'] / times['match']:.2f}x; bezier / slerp: "
+          f"{times['bezier'] / times['slerp']:.2f}x; target: auto < 10 s")
 
 
 if __name__ == "__main__":
