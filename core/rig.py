@@ -352,14 +352,9 @@ def bezier_channels(values, gaps):
     key's value or pointing back (Blender's ``BKE_nurb_handle_smooth_fcurve``). One F-curve per
     bone and channel, keyed on every frame outside its gaps; held at clip ends. Agrees with
     Blender's own curves to float precision (tests/addon)."""
-    out = np.array(values, dtype=float)
-    frames = np.arange(len(out))
+    out = interpolate_channels(values, gaps)  # held at clip ends
     for b in np.flatnonzero(gaps.any(axis=0)):
         keyed = np.flatnonzero(~gaps[:, b])
-        if len(keyed) == 0:
-            continue
-        out[:keyed[0], b] = out[keyed[0], b]
-        out[keyed[-1] + 1:, b] = out[keyed[-1], b]
         for k in range(out.shape[2]):
             y = out[keyed, b, k]
             turning = np.ones(len(y), dtype=bool)  # level handles: the ends, turning points
@@ -373,7 +368,8 @@ def bezier_channels(values, gaps):
                     runs[s, e] = _smooth_handles(keyed[s:e + 1], y[s:e + 1])
                 h, l = runs[s, e]
                 right, left = h[p - s], -h[p + 1 - s] / l[p + 1 - s]
-                t = (frames[keyed[p] + 1:keyed[p + 1]] - keyed[p]) / (keyed[p + 1] - keyed[p])
+                span = keyed[p + 1] - keyed[p]
+                t = np.arange(1, span) / span
                 u = 1 - t
                 out[keyed[p] + 1:keyed[p + 1], b, k] = (
                     u ** 3 * y[p] + 3 * u * u * t * (y[p] + right)
@@ -395,12 +391,12 @@ def _smooth_handles(x, y):
     dx, dy = np.r_[np.nan, np.diff(x)], np.r_[np.nan, np.diff(y)]
     l[1:-1] = dx[2:] / dx[1:-1]
     low, high = np.full(n, -np.inf), np.full(n, np.inf)
-    for i, limit in [(i - 1, dy[i]) for i in range(1, n)] + [(i, dy[i] * l[i])
-                                                             for i in range(1, n)]:
-        if limit >= 0:
-            high[i], low[i] = min(high[i], limit), 0.0
-        if limit <= 0:
-            high[i], low[i] = 0.0, max(low[i], limit)
+    for i in range(1, n):  # the handles either side of each interval, within its rise
+        for j, limit in ((i - 1, dy[i]), (i, dy[i] * l[i])):
+            if limit >= 0:
+                high[j], low[j] = min(high[j], limit), 0.0
+            if limit <= 0:
+                high[j], low[j] = 0.0, max(low[j], limit)
     below, diag, above = np.zeros(n), np.ones(n), np.zeros(n)  # the ends: level (h = 0)
     rhs = np.zeros(n)
     below[1:-1], diag[1:-1] = l[1:-1] ** 2, 2 * (l[1:-1] + 1)
