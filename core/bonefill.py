@@ -30,6 +30,11 @@ frames:
   side too), fitted on the frames within two seconds of the gap where the take keys them all
   (:func:`~.rig.regress_channels`); the same subject, the same moment of the take, no knowledge
   base;
+- ``learn``: the take's own interpolator (:func:`~.rig.learned_rotations`): each gap frame a
+  turn off the slerp between the keys, linear in the path between them and the steps to four
+  keys beyond each, with the weights that fill every other window of the gap's length where
+  the take keys a bone best (least squares): between the slerp and a cubic, whichever the
+  take's motion calls for, no knowledge base;
 - ``knn``: the knowledge base's joint positions near ``hermite``: the local models of
   :mod:`.recover`, fitted to the K nearest poses over every joint, pull the joints the gaps
   move towards likely poses, the more the further a frame lies from a key
@@ -39,7 +44,8 @@ frames:
 - ``auto`` (the default): per gap ``match``, ``mix`` (a quarter of the way from ``hermite`` to
   ``match``), ``stack`` (``interp``, ``hermite``, ``match`` and ``regress`` weighed together
   frame by frame, by the frame's distance from the keys: :mod:`.stacking`, the weights that
-  refill the take's copies best) or ``interp``, as copies of the gap - same bone, same length,
+  refill the take's copies best), on gaps shorter than ``LONG_STACK`` also ``learn``, or
+  ``interp``, as copies of the gap - same bone, same length,
   placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
   ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
   ``regress`` on the pose alone and ``regress`` with a Gaussian kernel beside; in equal parts
@@ -82,22 +88,27 @@ from .motion import Motion, blend_into_gaps, gap_runs, skeleton_limbs, widened
 from .posing import best_rotation, child_handles, forward, gram_schmidt, order_bones, \
     rotation_between, solve_pose, tail_handles
 from .rig import aligned_turns, basis_matrices, basis_turns, bezier_channels, \
-    hermite_channels, hermite_rotations, interpolate_channels, regress_channels
+    hermite_channels, hermite_rotations, interpolate_channels, learnable_runs, \
+    learned_rotations, regress_channels
 from . import stacking
 
-BONE_METHODS = ("auto", "knn", "match", "regress", "interp", "bezier", "hermite", "slerp",
-                "positions")
+BONE_METHODS = ("auto", "knn", "match", "regress", "learn", "interp", "bezier", "hermite",
+                "slerp", "positions")
 #: the methods that are not the project's own (``interp`` and ``bezier`` are Blender's own
 #: curves through LINEAR and Bezier keys)
 BONE_BASELINES = ("interp", "bezier", "hermite", "slerp")
 #: every candidate a gap can take (``half``: half-way from ``interp`` to ``knn``; ``recall``:
 #: the subtree carried onto the knowledge base's guess from the known joints alone; ``mix``:
 #: :data:`MIX_SHARE` of the way from ``hermite`` to ``match``)
-CANDIDATES = ("interp", "hermite", "knn", "half", "recall", "match", "mix", "regress",
+CANDIDATES = ("interp", "hermite", "learn", "knn", "half", "recall", "match", "mix", "regress",
               "regress_pose", "regress_kernel")
 #: what ``auto`` chooses from beside ``interp``: with a knowledge base of bone rotations, and
 #: without one (built from positions alone, or by an older version)
-AUTO_CANDIDATES = ("match", "mix")
+AUTO_CANDIDATES = ("match", "mix", "learn")
+#: candidates ``auto`` judges only on gaps shorter than :data:`LONG_STACK` with keys either side
+#: (``learn`` fits one interpolator per gap length on the take's windows: over a second, few and
+#: far apart; docs/METHOD_NOTES.md, session 61; at a clip's end it holds the key)
+SHORT_CANDIDATES = ("learn",)
 #: how far ``mix`` goes from ``hermite`` towards ``match`` (tuned, docs/METHOD_NOTES.md)
 MIX_SHARE = 0.25
 AUTO_POSITIONS = ("knn", "half", "recall")
@@ -162,7 +173,7 @@ KB_FILLS = ("knn", "half", "recall", "match", "mix")
 #: fits, none chosen): the take's own fills, stacked as :data:`STACK_FILLS` and
 #: :data:`LONG_STACK_FILLS` are without those of :data:`KB_FILLS` (chosen on non-test takes,
 #: docs/METHOD_NOTES.md, session 37)
-TAKE_ALONE_CANDIDATES = ("hermite", "regress", "regress_kernel")
+TAKE_ALONE_CANDIDATES = ("hermite", "regress", "regress_kernel", "learn")
 TAKE_ALONE_CONSENSUS = ("regress_kernel",)
 #: in a take too short for copies, without a knowledge base, a gap of :data:`LONG_GAP` seconds
 #: or more goes this share of the way from ``interp`` to ``regress_kernel`` (a shorter one takes
@@ -203,6 +214,10 @@ FEW_COPIES = 1.5
 COPY_MARGIN = 10
 #: ``hermite`` carries the velocities at a gap's ends as if the gap lasted at most this long
 HERMITE_SECONDS = 0.5
+#: ``learn``, the take's own interpolator (:func:`~.rig.learned_rotations`): keys beyond each
+#: gap's keys it reads, and its ridge
+LEARN_KEYS = 4
+LEARN_RIDGE = 1e-3
 #: how fast (m/s) the interpolation of a gap is taken to drift from the truth, per second to
 #: the nearest key: how far ``knn`` lets the knowledge base move a joint (tuned, METHOD_NOTES)
 GUESS_SPEED = 0.1
@@ -322,6 +337,8 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
         basis = job.hermite(channels, location, gaps, seen, on_channels=True)
     elif method == "regress":
         basis = job.regress(channels, location, gaps, seen)
+    elif method == "learn":
+        basis = job.learn(gaps, seen)
     elif method == "positions":
         basis = job.positions(seen, job.for_kb(gaps))
     elif method == "knn":
@@ -576,6 +593,16 @@ class _Job:
             out[..., :3, :3] = hermite_rotations(out[..., :3, :3], gaps, damping)
         return out
 
+    def learn(self, gaps, base):
+        """``learn``'s basis matrices (``base``: those of the interpolation): each gapped
+        rotation as the take's own motion goes on from the keys (:func:`~.rig.learned_rotations`,
+        fitted on the bones that place a joint)."""
+        out = np.array(base, dtype=float)
+        train = np.flatnonzero(~self.rig.roots & self.below.any(axis=1))
+        out[..., :3, :3] = learned_rotations(out[..., :3, :3], gaps, train, LEARN_KEYS,
+                                             LEARN_RIDGE)
+        return out
+
     def regress(self, channels, location, gaps, base, lags=REGRESS_LAGS, kernel=False):
         """Each gapped bone (not a root) as the rest of the body says (``regress``; with
         ``lags=()`` the body's pose at the frame alone, ``regress_pose``; with ``kernel``,
@@ -589,6 +616,8 @@ class _Job:
         ``base``: basis matrices that differ from the channels' only on the gapped bones."""
         interp = basis_matrices(self.rig, channels, location, base, gaps.any(axis=0))
         out = {"interp": interp}
+        if "learn" in names:
+            out["learn"] = self.learn(gaps, interp)
         if "regress" in names:
             out["regress"] = self.regress(channels, location, gaps, interp)
         if "regress_pose" in names:
@@ -612,7 +641,8 @@ class _Job:
         return {name: basis for name, basis in out.items() if name in names}
 
     def auto(self, channels, location, gaps, seen):
-        """Per gap, the candidate (:data:`AUTO_CANDIDATES` and ``stack``, or
+        """Per gap, the candidate (:data:`AUTO_CANDIDATES` and ``stack``, those of
+        :data:`SHORT_CANDIDATES` on short gaps only, or
         :data:`AUTO_POSITIONS` where the knowledge base holds no bone rotations) and the share
         of the way to it from
         interpolation (:data:`AUTO_SHARES`) that refill copies of the gap - same bone, same
@@ -707,11 +737,14 @@ class _Job:
                     blend = halfway(tried["interp"], tried[name], gaps | probe, share)
                     ratio[name, share] = np.log((self._errors(blend, truth, copies) + floor)
                                                 / (base + floor))
-            for i, (_, a, e) in enumerate(runs):
+            learnable = set(learnable_runs(gaps, LEARN_KEYS))
+            for i, (b, a, e) in enumerate(runs):
                 long = (e - a + 1) >= LONG_GAP * self.fps
                 own = owner == i
                 score = {key: (r[own].sum() + SHRINK * r.mean()) / (own.sum() + SHRINK)
-                         for key, r in ratio.items()}
+                         for key, r in ratio.items()
+                         if key[0] not in SHORT_CANDIDATES
+                         or (self.short(a, e) and (b, a, e) in learnable)}
                 passed = {key: value for key, value in score.items() if value < np.log(
                     PROMOTE if long else PROMOTE_SHORT_WHOLE if key[1] == 1 else PROMOTE_SHORT)}
                 choice[i] = (min(passed, key=passed.get) if passed else

@@ -400,7 +400,7 @@ def build_parser(extra=None):
                         "gone together for 3-60 frames per 120; "
                         "realgaps: the gaps of real captures (--gap-sources) on complete takes; "
                         "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
-                        "rate; methods auto, knn, match, regress, interp, bezier, hermite, "
+                        "rate; methods auto, knn, match, regress, learn, interp, bezier, hermite, "
                         "slerp, positions; bone-ends: the same, bones keyless for the first or "
                         "last 15-240 frames")
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")

@@ -462,6 +462,106 @@ def hermite_rotations(turns, gaps, damping=None):
     return out
 
 
+def learned_rotations(turns, gaps, train, keys=4, ridge=1e-3):
+    """Each gap of rotations (frames, bones, 3, 3) as the take's own motion says a gap of its
+    length goes on from the keys either side: on each gap frame, a turn off the slerp between
+    the keys before and after it, linear in the path between them and in the steps to ``keys``
+    keys beyond each (rotation vectors about the key), with one weight per term and frame
+    shared by the three axes - fitted (ridge ``ridge``, a share of the mean diagonal) on every
+    other window of the take where one of the bones ``train`` is keyed throughout. The slerp
+    and the cubic of :func:`hermite_rotations` are among these predictors; the fit takes the
+    one the take's motion favours (a jittering capture smooths its keys, a swinging limb
+    carries them on). Gaps without ``keys`` + 1 keys on both sides are left as they are."""
+    out = np.array(turns, dtype=float)
+    runs = learnable_runs(gaps, keys)
+    quats, weights = {}, {}
+
+    def of(b):  # a bone's rotations as unit quaternions, one hemisphere per frame
+        if b not in quats:
+            quats[b] = Rotation.from_matrix(out[:, b]).as_quat()
+        return quats[b]
+    for length in sorted({e - a + 1 for _, a, e in runs}):
+        width = length + 2 * keys + 2
+        terms, turns_off = [], []
+        for b in train:
+            hidden = np.concatenate([[0], np.cumsum(gaps[:, b])])
+            starts = np.flatnonzero(hidden[width:] == hidden[:-width])[::2]
+            if len(starts):
+                terms.append(_learned_terms(of(b), starts + keys, length, keys))
+                turns_off.append(_off_slerp(of(b), starts + keys, length))
+        if terms:
+            x = np.concatenate(terms).transpose(0, 2, 1).reshape(-1, 2 * keys + 1)
+            y = np.concatenate(turns_off).transpose(0, 2, 1).reshape(-1, length)
+            gram = x.T @ x
+            gram += ridge * np.trace(gram) / len(gram) * np.eye(len(gram))
+            weights[length] = np.linalg.solve(gram, x.T @ y)
+    for b, a, e in runs:
+        if e - a + 1 in weights:
+            before = np.array([a - 1])
+            turn = weights[e - a + 1].T @ _learned_terms(of(b), before, e - a + 1, keys)[0]
+            out[a:e + 1, b] = Rotation.from_quat(
+                _off_slerp(of(b), before, e - a + 1, turn[None])[0]).as_matrix()
+    return out
+
+
+def learnable_runs(gaps, keys):
+    """The gaps :func:`learned_rotations` fills, ``(bone, first, last)``: those with ``keys`` + 1
+    keys on both sides."""
+    frames = len(gaps)
+    return [(b, a, e) for b in np.flatnonzero(gaps.any(axis=0)) for a, e in _runs(gaps[:, b])
+            if a - 1 - keys >= 0 and e + 1 + keys < frames
+            and not gaps[a - 1 - keys:a, b].any() and not gaps[e + 1:e + 2 + keys, b].any()]
+
+
+def _learned_terms(q, before, length, keys):
+    """(windows, 2 keys + 1, 3): for gaps of ``length`` after frames ``before`` (quaternions
+    ``q``), the path from the key before to the key after and the steps from each to ``keys``
+    keys beyond it, as rotation vectors about the key they start from."""
+    first, last = q[before], q[before + length + 1]
+    terms = [_rotvec(_qmul(_qinv(first), last))]
+    terms += [_rotvec(_qmul(_qinv(first), q[before - j])) for j in range(1, keys + 1)]
+    terms += [_rotvec(_qmul(_qinv(last), q[before + length + 1 + j])) for j in range(1, keys + 1)]
+    return np.stack(terms, axis=1)
+
+
+def _off_slerp(q, before, length, turn=None):
+    """(windows, length, 3): each window's rotations as turns off the slerp between its keys
+    (frames ``before`` and ``before + length + 1`` of quaternions ``q``); with ``turn``
+    (windows, length, 3), instead the quaternions (windows, length, 4) that far off it."""
+    first = q[before][:, None]
+    path = _rotvec(_qmul(_qinv(q[before]), q[before + length + 1]))[:, None]
+    base = _qmul(first, _quat(path * (np.arange(1, length + 1) / (length + 1))[:, None]))
+    if turn is not None:
+        return _qmul(base, _quat(turn))
+    return _rotvec(_qmul(_qinv(base), q[before[:, None] + np.arange(1, length + 1)]))
+
+
+def _qmul(p, q):
+    """Quaternion products (x, y, z, w: scipy's order), broadcast."""
+    pv, pw, qv, qw = p[..., :3], p[..., 3:], q[..., :3], q[..., 3:]
+    return np.concatenate([pw * qv + qw * pv + np.cross(pv, qv),
+                           pw * qw - np.sum(pv * qv, axis=-1, keepdims=True)], axis=-1)
+
+
+def _qinv(q):
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def _rotvec(q):
+    """Rotation vectors of unit quaternions (the shorter way round)."""
+    q = np.where(q[..., 3:] < 0, -q, q)
+    norm = np.linalg.norm(q[..., :3], axis=-1, keepdims=True)
+    angle = 2 * np.arctan2(norm, q[..., 3:])
+    return q[..., :3] * np.where(norm > 1e-12, angle / np.maximum(norm, 1e-300), 2.0)
+
+
+def _quat(v):
+    """Unit quaternions of rotation vectors."""
+    angle = np.linalg.norm(v, axis=-1, keepdims=True)
+    half = np.where(angle > 1e-12, np.sin(angle / 2) / np.maximum(angle, 1e-300), 0.5)
+    return np.concatenate([v * half, np.cos(angle / 2)], axis=-1)
+
+
 #: at a clip end, the take's own regression of a bone stays within its channels' range over the
 #: training frames, widened by this share of it on each side (as the points' regression,
 #: :data:`~.regression.MARGIN`): a take that ends standing still is not the walk it learnt from
