@@ -493,7 +493,8 @@ def learned_rotations(turns, gaps, train, keys=4, ridge=1e-3):
             x = np.concatenate(terms).transpose(0, 2, 1).reshape(-1, 2 * keys + 1)
             y = np.concatenate(turns_off).transpose(0, 2, 1).reshape(-1, length)
             gram = x.T @ x
-            gram += ridge * np.trace(gram) / len(gram) * np.eye(len(gram))
+            # (and a floor: a take that stands still fits no turn at all)
+            gram += (ridge * np.trace(gram) / len(gram) + 1e-12) * np.eye(len(gram))
             weights[length] = np.linalg.solve(gram, x.T @ y)
     for b, a, e in runs:
         if e - a + 1 in weights:
