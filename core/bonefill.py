@@ -33,8 +33,8 @@ frames:
 - ``learn``: the take's own interpolator (:func:`~.rig.learned_rotations`): each gap frame a
   turn off the slerp between the keys, linear in the path between them and the steps to four
   keys beyond each, with the weights that fill every other window of the gap's length where
-  the take keys a bone best (least squares): between the slerp and a cubic, whichever the
-  take's motion calls for, no knowledge base;
+  the take keys the bone best (least squares): between the slerp and a cubic, whichever the
+  bone's motion calls for, no knowledge base;
 - ``knn``: the knowledge base's joint positions near ``hermite``: the local models of
   :mod:`.recover`, fitted to the K nearest poses over every joint, pull the joints the gaps
   move towards likely poses, the more the further a frame lies from a key
@@ -215,9 +215,10 @@ COPY_MARGIN = 10
 #: ``hermite`` carries the velocities at a gap's ends as if the gap lasted at most this long
 HERMITE_SECONDS = 0.5
 #: ``learn``, the take's own interpolator (:func:`~.rig.learned_rotations`): keys beyond each
-#: gap's keys it reads, and its ridge
+#: gap's keys it reads, and its ridge (none: the bone's own windows, hundreds of them, pin its
+#: few weights; docs/METHOD_NOTES.md, session 61)
 LEARN_KEYS = 4
-LEARN_RIDGE = 1e-3
+LEARN_RIDGE = 0.0
 #: how fast (m/s) the interpolation of a gap is taken to drift from the truth, per second to
 #: the nearest key: how far ``knn`` lets the knowledge base move a joint (tuned, METHOD_NOTES)
 GUESS_SPEED = 0.1
@@ -595,12 +596,9 @@ class _Job:
 
     def learn(self, gaps, base):
         """``learn``'s basis matrices (``base``: those of the interpolation): each gapped
-        rotation as the take's own motion goes on from the keys (:func:`~.rig.learned_rotations`,
-        fitted on the bones that place a joint)."""
+        rotation as the bone's own motion goes on from the keys (:func:`~.rig.learned_rotations`)."""
         out = np.array(base, dtype=float)
-        train = np.flatnonzero(~self.rig.roots & self.below.any(axis=1))
-        out[..., :3, :3] = learned_rotations(out[..., :3, :3], gaps, train, LEARN_KEYS,
-                                             LEARN_RIDGE)
+        out[..., :3, :3] = learned_rotations(out[..., :3, :3], gaps, LEARN_KEYS, LEARN_RIDGE)
         return out
 
     def regress(self, channels, location, gaps, base, lags=REGRESS_LAGS, kernel=False):

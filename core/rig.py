@@ -462,46 +462,34 @@ def hermite_rotations(turns, gaps, damping=None):
     return out
 
 
-def learned_rotations(turns, gaps, train, keys=4, ridge=1e-3):
-    """Each gap of rotations (frames, bones, 3, 3) as the take's own motion says a gap of its
+def learned_rotations(turns, gaps, keys=4, ridge=0.0):
+    """Each gap of rotations (frames, bones, 3, 3) as the bone's own motion says a gap of its
     length goes on from the keys either side: on each gap frame, a turn off the slerp between
     the keys before and after it, linear in the path between them and in the steps to ``keys``
     keys beyond each (rotation vectors about the key), with one weight per term and frame
-    shared by the three axes - fitted (ridge ``ridge``, a share of the mean diagonal) on every
-    other window of the take where one of the bones ``train`` is keyed throughout. The slerp
-    and the cubic of :func:`hermite_rotations` are among these predictors; the fit takes the
-    one the take's motion favours (a jittering capture smooths its keys, a swinging limb
-    carries them on). Gaps without ``keys`` + 1 keys on both sides are left as they are."""
+    shared by the three axes - fitted by least squares (ridge ``ridge``, a share of the mean
+    diagonal) on every other window of the take where the bone is keyed throughout. The slerp
+    and the cubic of :func:`hermite_rotations` are among these predictors; the fit takes what
+    the bone's motion favours (a jittering capture smooths its keys, a swinging limb carries
+    them on). Gaps without ``keys`` + 1 keys on both sides are left as they are."""
     out = np.array(turns, dtype=float)
-    runs = learnable_runs(gaps, keys)
     quats, weights = {}, {}
-
-    def of(b):  # a bone's rotations as unit quaternions, one hemisphere per frame
+    for b, a, e in learnable_runs(gaps, keys):
         if b not in quats:
             quats[b] = Rotation.from_matrix(out[:, b]).as_quat()
-        return quats[b]
-    for length in sorted({e - a + 1 for _, a, e in runs}):
-        width = length + 2 * keys + 2
-        terms, turns_off = [], []
-        for b in train:
+        q, length = quats[b], e - a + 1
+        if (b, length) not in weights:
+            width = length + 2 * keys + 2
             hidden = np.concatenate([[0], np.cumsum(gaps[:, b])])
-            starts = np.flatnonzero(hidden[width:] == hidden[:-width])[::2]
-            if len(starts):
-                terms.append(_learned_terms(of(b), starts + keys, length, keys))
-                turns_off.append(_off_slerp(of(b), starts + keys, length))
-        if terms:
-            x = np.concatenate(terms).transpose(0, 2, 1).reshape(-1, 2 * keys + 1)
-            y = np.concatenate(turns_off).transpose(0, 2, 1).reshape(-1, length)
-            gram = x.T @ x
-            # (and a floor: a take that stands still fits no turn at all)
+            starts = np.flatnonzero(hidden[width:] == hidden[:-width])[::2] + keys
+            x = _learned_terms(q, starts, length, keys).transpose(0, 2, 1).reshape(-1, 2 * keys + 1)
+            y = _off_slerp(q, starts, length).transpose(0, 2, 1).reshape(-1, length)
+            gram = x.T @ x  # (with a floor: a bone that stands still fits no turn at all)
             gram += (ridge * np.trace(gram) / len(gram) + 1e-12) * np.eye(len(gram))
-            weights[length] = np.linalg.solve(gram, x.T @ y)
-    for b, a, e in runs:
-        if e - a + 1 in weights:
-            before = np.array([a - 1])
-            turn = weights[e - a + 1].T @ _learned_terms(of(b), before, e - a + 1, keys)[0]
-            out[a:e + 1, b] = Rotation.from_quat(
-                _off_slerp(of(b), before, e - a + 1, turn[None])[0]).as_matrix()
+            weights[b, length] = np.linalg.solve(gram, x.T @ y)
+        turn = weights[b, length].T @ _learned_terms(q, np.array([a - 1]), length, keys)[0]
+        out[a:e + 1, b] = Rotation.from_quat(
+            _off_slerp(q, np.array([a - 1]), length, turn[None])[0]).as_matrix()
     return out
 
 

@@ -360,7 +360,7 @@ def test_the_takes_own_interpolator_carries_a_steady_acceleration_exactly():
     gaps[100:112, 0] = gaps[200:212, 1] = gaps[150:170, 2] = True
     gaps[294:, 2] = True  # too near the clip's end for four keys beyond its key: left alone
     shown = np.where(gaps[..., None, None], np.eye(3), truth)
-    filled = learned_rotations(shown, gaps, [0, 1, 2], keys=4, ridge=1e-12)
+    filled = learned_rotations(shown, gaps, keys=4)
     inside = gaps & (np.arange(300) < 294)[:, None]
     assert _worst_angle(filled, truth, inside) < 1e-6
     cubic = hermite_rotations(shown, inside)  # one-frame steps lag a turn that speeds up
@@ -368,7 +368,7 @@ def test_the_takes_own_interpolator_carries_a_steady_acceleration_exactly():
     assert np.array_equal(filled[294:, 2], shown[294:, 2])
     assert np.array_equal(filled[~gaps], truth[~gaps])
     still = np.broadcast_to(np.eye(3), truth.shape)  # nothing turns: nothing to fit, no error
-    assert np.allclose(learned_rotations(still, gaps, [0, 1, 2]), still)
+    assert np.allclose(learned_rotations(still, gaps), still)
 
 
 def test_the_takes_own_interpolator_smooths_a_jittering_capture(data_dir, walk, daz_kb):
