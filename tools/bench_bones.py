@@ -52,7 +52,7 @@ def main():
     print(f"take: {len(channels)} frames, {len(rig.names)} bones, {int(gaps.sum())} gap frames "
           f"on {len(bones)} gaps; KB {kb.size} poses; device {args.device}")
     times = {}
-    for method in ("slerp", "bezier", "regress", "match", "knn", "auto"):
+    for method in ("slerp", "bezier", "learn", "regress", "match", "knn", "auto"):
         runs = []
         for _ in range(args.repeat):
             start = time.perf_counter()
