@@ -597,7 +597,8 @@ class _Job:
 
     def learn(self, gaps, base):
         """``learn``'s basis matrices (``base``: those of the interpolation): each gapped
-        rotation as the bone's own motion goes on from the keys (:func:`~.rig.learned_rotations`)."""
+        rotation as the bone's own motion goes on from the keys
+        (:func:`~.rig.learned_rotations`)."""
         out = np.array(base, dtype=float)
         out[..., :3, :3] = learned_rotations(out[..., :3, :3], gaps, LEARN_KEYS, LEARN_RIDGE)
         return out

@@ -482,7 +482,8 @@ def learned_rotations(turns, gaps, keys=4, ridge=0.0):
             width = length + 2 * keys + 2
             hidden = np.concatenate([[0], np.cumsum(gaps[:, b])])
             starts = np.flatnonzero(hidden[width:] == hidden[:-width])[::2] + keys
-            x = _learned_terms(q, starts, length, keys).transpose(0, 2, 1).reshape(-1, 2 * keys + 1)
+            x = _learned_terms(q, starts, length, keys).transpose(0, 2, 1).reshape(
+                -1, 2 * keys + 1)
             y = _off_slerp(q, starts, length).transpose(0, 2, 1).reshape(-1, length)
             gram = x.T @ x  # (with a floor: a bone that stands still fits no turn at all)
             gram += (ridge * np.trace(gram) / len(gram) + 1e-12) * np.eye(len(gram))
