@@ -44,7 +44,7 @@ frames:
 - ``auto`` (the default): per gap ``match``, ``mix`` (a quarter of the way from ``hermite`` to
   ``match``), ``stack`` (``interp``, ``hermite``, ``match`` and ``regress`` weighed together
   frame by frame, by the frame's distance from the keys: :mod:`.stacking`, the weights that
-  refill the take's copies best), on gaps under ``SHORT_SECONDS`` (0.4 s) also ``learn``, or
+  refill the take's copies best), on gaps under ``LEARN_SECONDS`` (0.4 s) also ``learn``, or
   ``interp``, as copies of the gap - same bone, same length,
   placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
   ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
@@ -105,11 +105,10 @@ CANDIDATES = ("interp", "hermite", "learn", "knn", "half", "recall", "match", "m
 #: what ``auto`` chooses from beside ``interp``: with a knowledge base of bone rotations, and
 #: without one (built from positions alone, or by an older version)
 AUTO_CANDIDATES = ("match", "mix", "learn")
-#: candidates ``auto`` judges only on gaps shorter than :data:`SHORT_SECONDS` with keys either
-#: side (``learn``, the bone's own interpolator, gains on gaps of 0.125-0.25 s and loses from 0.5 s
-#: on the non-test takes; at a clip's end it holds the key; docs/METHOD_NOTES.md, session 61)
-SHORT_CANDIDATES = ("learn",)
-SHORT_SECONDS = 0.4
+#: ``auto`` judges ``learn`` only on gaps shorter than this (seconds) with keys either side (the
+#: bone's own interpolator gains on gaps of 0.125-0.25 s and loses from 0.5 s on the non-test
+#: takes; at a clip's end it holds the key; docs/METHOD_NOTES.md, session 61)
+LEARN_SECONDS = 0.4
 #: how far ``mix`` goes from ``hermite`` towards ``match`` (tuned, docs/METHOD_NOTES.md)
 MIX_SHARE = 0.25
 AUTO_POSITIONS = ("knn", "half", "recall")
@@ -641,8 +640,8 @@ class _Job:
         return {name: basis for name, basis in out.items() if name in names}
 
     def auto(self, channels, location, gaps, seen):
-        """Per gap, the candidate (:data:`AUTO_CANDIDATES` and ``stack``, those of
-        :data:`SHORT_CANDIDATES` on gaps under :data:`SHORT_SECONDS` only, or
+        """Per gap, the candidate (:data:`AUTO_CANDIDATES` and ``stack``, ``learn`` on gaps
+        under :data:`LEARN_SECONDS` only, or
         :data:`AUTO_POSITIONS` where the knowledge base holds no bone rotations) and the share
         of the way to it from
         interpolation (:data:`AUTO_SHARES`) that refill copies of the gap - same bone, same
@@ -743,8 +742,8 @@ class _Job:
                 own = owner == i
                 score = {key: (r[own].sum() + SHRINK * r.mean()) / (own.sum() + SHRINK)
                          for key, r in ratio.items()
-                         if key[0] not in SHORT_CANDIDATES
-                         or (e - a + 1 < SHORT_SECONDS * self.fps and (b, a, e) in learnable)}
+                         if key[0] != "learn"
+                         or (e - a + 1 < LEARN_SECONDS * self.fps and (b, a, e) in learnable)}
                 passed = {key: value for key, value in score.items() if value < np.log(
                     PROMOTE if long else PROMOTE_SHORT_WHOLE if key[1] == 1 else PROMOTE_SHORT)}
                 choice[i] = (min(passed, key=passed.get) if passed else
