@@ -34,7 +34,9 @@ frames:
   turn off the slerp between the keys, linear in the path between them and the steps to four
   keys beyond each, with the weights that fill every other window of the gap's length where
   the take keys the bone best (least squares): between the slerp and a cubic, whichever the
-  bone's motion calls for, no knowledge base;
+  bone's motion calls for; then what that misses, as the bones within two joints of it keyed
+  throughout the gap miss their own such fits there (a 3 x 3 ridge regression per bone,
+  fitted on the same windows): the body's motion over the gap, no knowledge base;
 - ``knn``: the knowledge base's joint positions near ``hermite``: the local models of
   :mod:`.recover`, fitted to the K nearest poses over every joint, pull the joints the gaps
   move towards likely poses, the more the further a frame lies from a key
@@ -219,6 +221,11 @@ HERMITE_SECONDS = 0.5
 #: few weights; docs/METHOD_NOTES.md, session 61)
 LEARN_KEYS = 4
 LEARN_RIDGE = 0.0
+#: ``learn``'s bones that tell of a gapped one: those within this many joints of it; the ridges
+#: (shares of the mean diagonal) of what their own fits miss, the one that predicts each half of
+#: the take's windows best from the other (docs/METHOD_NOTES.md, session 62)
+LEARN_HOPS = 2
+LEARN_BODY_RIDGES = (0.1, 0.3, 1.0)
 #: how fast (m/s) the interpolation of a gap is taken to drift from the truth, per second to
 #: the nearest key: how far ``knn`` lets the knowledge base move a joint (tuned, METHOD_NOTES)
 GUESS_SPEED = 0.1
@@ -596,10 +603,11 @@ class _Job:
 
     def learn(self, gaps, base):
         """``learn``'s basis matrices (``base``: those of the interpolation): each gapped
-        rotation as the bone's own motion goes on from the keys
-        (:func:`~.rig.learned_rotations`)."""
+        rotation as the bone's own motion goes on from the keys, and as the motion of the bones
+        about it says (:func:`~.rig.learned_rotations`)."""
         out = np.array(base, dtype=float)
-        out[..., :3, :3] = learned_rotations(out[..., :3, :3], gaps, LEARN_KEYS, LEARN_RIDGE)
+        out[..., :3, :3] = learned_rotations(out[..., :3, :3], gaps, LEARN_KEYS, LEARN_RIDGE,
+                                             self.rig.near(LEARN_HOPS), LEARN_BODY_RIDGES)
         return out
 
     def regress(self, channels, location, gaps, base, lags=REGRESS_LAGS, kernel=False):

@@ -96,6 +96,18 @@ class Rig:
             below |= np.eye(n, dtype=bool) & ~self.roots[:, None]
         return below
 
+    def near(self, hops):
+        """Per bone, the sorted bones within ``hops`` steps of it (to a parent or a child each
+        step), roots and the bone itself left out."""
+        out = []
+        for b in range(len(self.parents)):
+            found = {b}
+            for _ in range(hops):
+                found |= {c for c, p in enumerate(self.parents) if p in found}
+                found |= {self.parents[c] for c in found if self.parents[c] >= 0}
+            out.append([c for c in sorted(found - {b}) if self.parents[c] >= 0])
+        return out
+
     def moved(self, gaps):
         """(frames, joints) bool: the joints that the bones gapped in ``gaps`` (frames, bones)
         move at each frame."""
@@ -462,36 +474,122 @@ def hermite_rotations(turns, gaps, damping=None):
     return out
 
 
-def learned_rotations(turns, gaps, keys=4, ridge=0.0):
+def learned_rotations(turns, gaps, keys=4, ridge=0.0, near=None, body_ridges=(0.1,),
+                      fewest=10, most=200):
     """Each gap of rotations (frames, bones, 3, 3) as the bone's own motion says a gap of its
     length goes on from the keys either side: on each gap frame, a turn off the slerp between
     the keys before and after it, linear in the path between them and in the steps to ``keys``
     keys beyond each (rotation vectors about the key), with one weight per term and frame
     shared by the three axes - fitted by least squares (ridge ``ridge``, a share of the mean
-    diagonal) on every other window of the take where the bone is keyed throughout. The slerp
+    diagonal) on every other window of the take where the bone is keyed throughout (at most
+    ``most``, spread over the take). The slerp
     and the cubic of :func:`hermite_rotations` are among these predictors; the fit takes what
     the bone's motion favours (a jittering capture smooths its keys, a swinging limb carries
-    them on). Gaps without ``keys`` + 1 keys on both sides are left as they are."""
+    them on). Gaps without ``keys`` + 1 keys on both sides are left as they are.
+
+    ``near`` (per bone, the bones whose motion may tell of it): then what that fit misses on
+    the gap is what the same fits of those of them keyed throughout the gap's window (gap,
+    keys and keys beyond) miss at the same frames, times 3 x 3 weights shared by the gap's
+    frames, fitted on the bone's windows where all of them are keyed too, if there are
+    ``fewest`` such windows (at most ``most``, spread over the take), with the ridge of
+    ``body_ridges`` that predicts each half of those windows best from the other, and not at
+    all if none predicts them better than the fit alone: when the forearm swings on past what
+    its keys foretold, so does the hand."""
     out = np.array(turns, dtype=float)
-    quats, weights = {}, {}
+    own = _OwnMotion(turns, gaps, keys, ridge, most)
     for b, a, e in learnable_runs(gaps, keys):
-        if b not in quats:
-            quats[b] = Rotation.from_matrix(out[:, b]).as_quat()
-        q, length = quats[b], e - a + 1
-        if (b, length) not in weights:
-            width = length + 2 * keys + 2
-            hidden = np.concatenate([[0], np.cumsum(gaps[:, b])])
-            starts = np.flatnonzero(hidden[width:] == hidden[:-width])[::2] + keys
-            x = _learned_terms(q, starts, length, keys).transpose(0, 2, 1).reshape(
-                -1, 2 * keys + 1)
+        length, key = e - a + 1, np.array([a - 1])
+        fill = own.predict(b, key, length)[0]
+        others = [f for f in (near[b] if near is not None else ())
+                  if not gaps[a - 1 - keys:e + 2 + keys, f].any()]
+        train = own.windows(b, length)[::2]
+        for f in others:
+            train = train[own.keyed(f, train, length)]
+        train = _spread(train, most)
+        if others and len(train) >= fewest:
+            x = np.concatenate([own.missed(f, train, length) for f in others], axis=2)
+            weights = _body_weights(x, own.missed(b, train, length), body_ridges)
+            if weights is not None:
+                now = np.concatenate([own.missed(f, key, length)[0] for f in others], axis=1)
+                fill = _qmul(fill, _quat(now @ weights))
+        out[a:e + 1, b] = Rotation.from_quat(fill).as_matrix()
+    return out
+
+
+def _body_weights(x, y, ridges):
+    """Weights (features, 3) of ``y`` (windows, length, 3) on ``x`` (windows, length,
+    features), with the ridge of ``ridges`` (shares of the mean diagonal) that predicts each
+    half of the windows in time best from the other; None where none beats predicting 0."""
+    def fit(rows, ridge):
+        a, b = x[rows].reshape(-1, x.shape[2]), y[rows].reshape(-1, 3)
+        gram = a.T @ a
+        gram += (ridge * np.trace(gram) / len(gram) + 1e-12) * np.eye(len(gram))
+        return np.linalg.solve(gram, a.T @ b)
+
+    half = len(x) // 2
+    folds = [(slice(None, half), slice(half, None)), (slice(half, None), slice(None, half))]
+    best, chosen = np.sum(y ** 2), None
+    for ridge in ridges:
+        missed = sum(np.sum((y[test] - x[test] @ fit(train, ridge)) ** 2)
+                     for train, test in folds)
+        if missed < best:
+            best, chosen = missed, ridge
+    return None if chosen is None else fit(slice(None), chosen)
+
+
+class _OwnMotion:
+    """Each bone's own fit of :func:`learned_rotations` per gap length, made on demand."""
+
+    def __init__(self, turns, gaps, keys, ridge, most):
+        self.turns, self.gaps, self.keys, self.ridge, self.most = turns, gaps, keys, ridge, most
+        self.quats, self.weights = {}, {}
+
+    def quat(self, b):
+        if b not in self.quats:
+            self.quats[b] = Rotation.from_matrix(self.turns[:, b]).as_quat()
+        return self.quats[b]
+
+    def windows(self, b, length):
+        """The frames before the windows of ``length`` frames where ``b`` is keyed, with keys
+        and ``keys`` keys beyond on both sides."""
+        return np.flatnonzero(self.keyed(b, np.arange(len(self.gaps)), length))
+
+    def keyed(self, b, before, length):
+        """(windows,) bool: whether ``b`` is keyed throughout the windows after ``before``."""
+        hidden = np.concatenate([[0], np.cumsum(self.gaps[:, b])])
+        lo, hi = before - self.keys, before + length + 2 + self.keys  # frames lo .. hi - 1
+        fits = (lo >= 0) & (hi <= len(self.gaps))
+        return fits & (hidden[np.clip(hi, 0, len(self.gaps))] == hidden[np.clip(lo, 0, None)])
+
+    def fit(self, b, length):
+        if (b, length) not in self.weights:
+            q, starts = self.quat(b), _spread(self.windows(b, length)[::2], self.most)
+            x = _learned_terms(q, starts, length, self.keys).transpose(0, 2, 1).reshape(
+                -1, 2 * self.keys + 1)
             y = _off_slerp(q, starts, length).transpose(0, 2, 1).reshape(-1, length)
             gram = x.T @ x  # (with a floor: a bone that stands still fits no turn at all)
-            gram += (ridge * np.trace(gram) / len(gram) + 1e-12) * np.eye(len(gram))
-            weights[b, length] = np.linalg.solve(gram, x.T @ y)
-        turn = weights[b, length].T @ _learned_terms(q, np.array([a - 1]), length, keys)[0]
-        out[a:e + 1, b] = Rotation.from_quat(
-            _off_slerp(q, np.array([a - 1]), length, turn[None])[0]).as_matrix()
-    return out
+            gram += (self.ridge * np.trace(gram) / len(gram) + 1e-12) * np.eye(len(gram))
+            self.weights[b, length] = np.linalg.solve(gram, x.T @ y)
+        return self.weights[b, length]
+
+    def predict(self, b, before, length):
+        """(windows, length, 4): the fit's quaternions on the windows after ``before``."""
+        q = self.quat(b)
+        turn = np.einsum("tl,wtk->wlk", self.fit(b, length),
+                         _learned_terms(q, before, length, self.keys))
+        return _off_slerp(q, before, length, turn)
+
+    def missed(self, b, before, length):
+        """(windows, length, 3): what the fit misses there (rotation vectors)."""
+        truth = self.quat(b)[before[:, None] + 1 + np.arange(length)]
+        return _rotvec(_qmul(_qinv(self.predict(b, before, length)), truth))
+
+
+def _spread(windows, most):
+    """At most ``most`` of ``windows``, spread evenly."""
+    if len(windows) <= most:
+        return windows
+    return windows[np.linspace(0, len(windows) - 1, most).round().astype(int)]
 
 
 def learnable_runs(gaps, keys):

@@ -129,14 +129,10 @@ def _calm(rig, channels, gaps, bone, start, length, copies, hops=2, floor=0.05):
     """log((D_gap + floor) / (mean D_copy + floor)): D the RMS over the bones within ``hops``
     joints of ``bone`` (those keyed through the gap and every copy) of their angle (degrees) off
     the straight line between their keys either side of the window; None without copies."""
-    near = {bone}
-    for _ in range(hops):
-        near |= {b for b, p in enumerate(rig.parents) if p in near}
-        near |= {rig.parents[b] for b in near if rig.parents[b] >= 0}
     windows = [(start, length)] + [(c[2], c[3]) for c in copies]
     off = np.array([_off_line(rig, channels, gaps, s, n) for s, n in windows])
     use = np.zeros(off.shape[1], bool)
-    use[sorted(near - {bone})] = True
+    use[rig.near(hops)[bone]] = True
     use &= ~np.isnan(off).any(axis=0)
     if len(windows) < 2 or not use.any():
         return None
