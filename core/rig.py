@@ -482,10 +482,10 @@ def learned_rotations(turns, gaps, keys=4, ridge=0.0, near=None, body_ridges=(0.
     keys beyond each (rotation vectors about the key), with one weight per term and frame
     shared by the three axes - fitted by least squares (ridge ``ridge``, a share of the mean
     diagonal) on every other window of the take where the bone is keyed throughout (at most
-    ``most``, spread over the take). The slerp
-    and the cubic of :func:`hermite_rotations` are among these predictors; the fit takes what
-    the bone's motion favours (a jittering capture smooths its keys, a swinging limb carries
-    them on). Gaps without ``keys`` + 1 keys on both sides are left as they are.
+    ``most``, spread over the take). The slerp and the cubic of :func:`hermite_rotations` are
+    among these predictors; the fit takes what the bone's motion favours (a jittering capture
+    smooths its keys, a swinging limb carries them on). Gaps without ``keys`` + 1 keys on both
+    sides are left as they are.
 
     ``near`` (per bone, the bones whose motion may tell of it): then what that fit misses on
     the gap is what the same fits of those of them keyed throughout the gap's window (gap,

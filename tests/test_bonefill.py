@@ -411,10 +411,10 @@ def test_the_takes_own_interpolator_follows_a_neighbour_that_moves_with_the_bone
 def test_the_takes_own_interpolator_smooths_a_jittering_capture(data_dir, walk, daz_kb):
     """The ASF/AMC walk 07_05 (a tuning take) jitters from frame to frame: the cubic carries
     one-frame steps into its gaps and loses to Blender's interpolation; ``learn``, fitted on
-    the bone's own windows, does not (measured: three bones, 15 / 30 frames, learn 11.4 /
-    21.0 mm, hermite 15.9 / 35.6, interp 11.4 / 24.1; gaps lost to the interpolation 2 / 4
-    against 23 / 6). On the Daz walk ``auto`` takes it on some gaps under 0.4 s, never on
-    long ones."""
+    the bone's own windows and corrected by its neighbours, does not (measured: three bones,
+    15 / 30 frames, learn 6.9 / 15.6 mm (session 61, without the neighbours: 11.4 / 21.0),
+    hermite 15.9 / 35.6, interp 11.4 / 24.1; gaps lost to the interpolation 1 / 3 against 23 /
+    6). On the Daz walk ``auto`` takes it on some gaps under 0.4 s, never on long ones."""
     rig, channels, location, fps = read_rig_take(data_dir / "cmu/asfamc/07/07_05.amc")
     truth = basis_matrices(rig, channels, location)
     for setting in ((3, 15), (3, 30)):
@@ -425,8 +425,8 @@ def test_the_takes_own_interpolator_smooths_a_jittering_capture(data_dir, walk, 
         rmse = {m: e["rmse_missing_mm"] for m, e in errors.items()}
         interp = np.array(errors["interp"]["gaps_mm"])
         lost = {m: np.sum(np.array(e["gaps_mm"]) > 1.1 * interp + 2) for m, e in errors.items()}
-        assert rmse["learn"] < 0.75 * rmse["hermite"]
-        assert rmse["learn"] < (1.0 if setting[1] == 15 else 0.9) * rmse["interp"]
+        assert rmse["learn"] < 0.5 * rmse["hermite"]
+        assert rmse["learn"] < 0.75 * rmse["interp"]
         assert lost["learn"] < lost["hermite"]
     rig, channels, location, fps = walk
     for setting, short in (((3, 15), True), ((1, 120), False)):
