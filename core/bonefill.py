@@ -601,13 +601,14 @@ class _Job:
             out[..., :3, :3] = hermite_rotations(out[..., :3, :3], gaps, damping)
         return out
 
-    def learn(self, gaps, base):
+    def learn(self, gaps, base, fill=None):
         """``learn``'s basis matrices (``base``: those of the interpolation): each gapped
-        rotation as the bone's own motion goes on from the keys, and as the motion of the bones
-        about it says (:func:`~.rig.learned_rotations`)."""
+        rotation (of those in ``fill``, default all) as the bone's own motion goes on from the
+        keys, and as the motion of the bones about it says (:func:`~.rig.learned_rotations`)."""
         out = np.array(base, dtype=float)
         out[..., :3, :3] = learned_rotations(out[..., :3, :3], gaps, LEARN_KEYS, LEARN_RIDGE,
-                                             self.rig.near(LEARN_HOPS), LEARN_BODY_RIDGES)
+                                             self.rig.near(LEARN_HOPS), LEARN_BODY_RIDGES,
+                                             fill=fill)
         return out
 
     def regress(self, channels, location, gaps, base, lags=REGRESS_LAGS, kernel=False):
@@ -618,13 +619,16 @@ class _Job:
             channels, gaps, self.fps, lags, REGRESS_WINDOW, REGRESS_RIDGE,
             fixed=self.rig.roots, kernel=kernel), location, base, gaps.any(axis=0))
 
-    def candidates(self, channels, location, gaps, names, base):
+    def candidates(self, channels, location, gaps, names, base, learn_on=None):
         """Basis matrices of the named candidates (of :data:`CANDIDATES`) for these gaps;
-        ``base``: basis matrices that differ from the channels' only on the gapped bones."""
+        ``base``: basis matrices that differ from the channels' only on the gapped bones;
+        ``learn_on``: the gaps ``learn`` fits around (all the take's) and those it fills
+        (default: ``gaps`` both)."""
         interp = basis_matrices(self.rig, channels, location, base, gaps.any(axis=0))
         out = {"interp": interp}
         if "learn" in names:
-            out["learn"] = self.learn(gaps, interp)
+            unknown, fill = learn_on or (gaps, None)
+            out["learn"] = self.learn(unknown, interp, fill)
         if "regress" in names:
             out["regress"] = self.regress(channels, location, gaps, interp)
         if "regress_pose" in names:
@@ -719,8 +723,15 @@ class _Job:
             hidden = interpolate_channels(channels, probe)
             hidden_loc = np.where((probe & self.moves)[..., None],
                                   interpolate_channels(location, probe), location)
+            # learn only where it is judged: short gaps with keys beyond their keys, and copies
+            learnable = set(learnable_runs(gaps, LEARN_KEYS))
+            learns = np.array([e - a + 1 < LEARN_SECONDS * self.fps and (b, a, e) in learnable
+                               for b, a, e in runs])
+            judged = np.zeros_like(gaps)
+            for i, b, start, length in copies:
+                judged[start:start + length, b] = learns[i]
             tried = self.candidates(hidden, hidden_loc, gaps | probe, ("interp",) + names + fills,
-                                    seen)
+                                    seen, learn_on=(gaps | probe, judged))
             truth = self.world(seen)
             if stack:  # each copy stacked with weights its own gap's copies had no part in
                 table, by_gap, long_table = self._stack_tables(tried, truth, copies, fills)
@@ -738,20 +749,20 @@ class _Job:
                                          / (base + floor)))
                 pull = min(CUBIC_PULL, max(0.0, favour - CUBIC_TRUST))
             owner = np.array([c[0] for c in copies])
+            everywhere, learnt = np.ones(len(copies), bool), learns[owner]
             ratio = {}
             for name in names:
                 for share in AUTO_SHARES:
                     blend = halfway(tried["interp"], tried[name], gaps | probe, share)
                     ratio[name, share] = np.log((self._errors(blend, truth, copies) + floor)
                                                 / (base + floor))
-            learnable = set(learnable_runs(gaps, LEARN_KEYS))
             for i, (b, a, e) in enumerate(runs):
                 long = (e - a + 1) >= LONG_GAP * self.fps
                 own = owner == i
-                score = {key: (r[own].sum() + SHRINK * r.mean()) / (own.sum() + SHRINK)
-                         for key, r in ratio.items()
-                         if key[0] != "learn"
-                         or (e - a + 1 < LEARN_SECONDS * self.fps and (b, a, e) in learnable)}
+                score = {key: (r[own].sum() + SHRINK * r[among].mean()) / (own.sum() + SHRINK)
+                         for key, r in ratio.items()  # learn: among the copies it fills
+                         for among in [learnt if key[0] == "learn" else everywhere]
+                         if among.any() and (key[0] != "learn" or learns[i])}
                 passed = {key: value for key, value in score.items() if value < np.log(
                     PROMOTE if long else PROMOTE_SHORT_WHOLE if key[1] == 1 else PROMOTE_SHORT)}
                 choice[i] = (min(passed, key=passed.get) if passed else
@@ -769,7 +780,8 @@ class _Job:
         corroborated = [None] * len(runs)
         if wanted.any():
             made = self.candidates(channels, location, wanted,
-                                   {name for name, _ in choice} | set(fills), seen)
+                                   {name for name, _ in choice} | set(fills), seen,
+                                   learn_on=(gaps, wanted))
             if stack:
                 made["stack"] = self._stacked(made, wanted, self.stack_fills,
                                               lambda b, a: table)

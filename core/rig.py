@@ -475,7 +475,7 @@ def hermite_rotations(turns, gaps, damping=None):
 
 
 def learned_rotations(turns, gaps, keys=4, ridge=0.0, near=None, body_ridges=(0.1,),
-                      fewest=10, most=200):
+                      fewest=10, most=200, fill=None):
     """Each gap of rotations (frames, bones, 3, 3) as the bone's own motion says a gap of its
     length goes on from the keys either side: on each gap frame, a turn off the slerp between
     the keys before and after it, linear in the path between them and in the steps to ``keys``
@@ -494,12 +494,17 @@ def learned_rotations(turns, gaps, keys=4, ridge=0.0, near=None, body_ridges=(0.
     ``fewest`` such windows (at most ``most``, spread over the take), with the ridge of
     ``body_ridges`` that predicts each half of those windows best from the other, and not at
     all if none predicts them better than the fit alone: when the forearm swings on past what
-    its keys foretold, so does the hand."""
+    its keys foretold, so does the hand.
+
+    ``fill`` ((frames, bones) bool): fill only the gaps in it (all of ``gaps`` stay unknown to
+    the fits); default all."""
     out = np.array(turns, dtype=float)
     own = _OwnMotion(turns, gaps, keys, ridge, most)
     for b, a, e in learnable_runs(gaps, keys):
+        if fill is not None and not fill[a, b]:
+            continue
         length, key = e - a + 1, np.array([a - 1])
-        fill = own.predict(b, key, length)[0]
+        filled = own.predict(b, key, length)[0]
         others = [f for f in (near[b] if near is not None else ())
                   if not gaps[a - 1 - keys:e + 2 + keys, f].any()]
         train = own.windows(b, length)[::2]
@@ -511,8 +516,8 @@ def learned_rotations(turns, gaps, keys=4, ridge=0.0, near=None, body_ridges=(0.
             weights = _body_weights(x, own.missed(b, train, length), body_ridges)
             if weights is not None:
                 now = np.concatenate([own.missed(f, key, length)[0] for f in others], axis=1)
-                fill = _qmul(fill, _quat(now @ weights))
-        out[a:e + 1, b] = Rotation.from_quat(fill).as_matrix()
+                filled = _qmul(filled, _quat(now @ weights))
+        out[a:e + 1, b] = Rotation.from_quat(filled).as_matrix()
     return out
 
 
