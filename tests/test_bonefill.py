@@ -367,6 +367,8 @@ def test_the_takes_own_interpolator_carries_a_steady_acceleration_exactly():
     assert _worst_angle(cubic, truth, inside) > 1e-4
     assert np.array_equal(filled[294:, 2], shown[294:, 2])
     assert np.array_equal(filled[~gaps], truth[~gaps])
+    early = learned_rotations(shown, gaps, fill=gaps & (np.arange(300) < 150)[:, None])
+    assert np.array_equal(early[:150], filled[:150]) and np.array_equal(early[150:], shown[150:])
     still = np.broadcast_to(np.eye(3), truth.shape)  # nothing turns: nothing to fit, no error
     assert np.allclose(learned_rotations(still, gaps), still)
 
