@@ -526,10 +526,7 @@ def _body_weights(x, y, ridges):
     features), with the ridge of ``ridges`` (shares of the mean diagonal) that predicts each
     half of the windows in time best from the other; None where none beats predicting 0."""
     def fit(rows, ridge):
-        a, b = x[rows].reshape(-1, x.shape[2]), y[rows].reshape(-1, 3)
-        gram = a.T @ a
-        gram += (ridge * np.trace(gram) / len(gram) + 1e-12) * np.eye(len(gram))
-        return np.linalg.solve(gram, a.T @ b)
+        return _ridge(x[rows].reshape(-1, x.shape[2]), y[rows].reshape(-1, 3), ridge)
 
     half = len(x) // 2
     folds = [(slice(None, half), slice(half, None)), (slice(half, None), slice(None, half))]
@@ -572,9 +569,7 @@ class _OwnMotion:
             x = _learned_terms(q, starts, length, self.keys).transpose(0, 2, 1).reshape(
                 -1, 2 * self.keys + 1)
             y = _off_slerp(q, starts, length).transpose(0, 2, 1).reshape(-1, length)
-            gram = x.T @ x  # (with a floor: a bone that stands still fits no turn at all)
-            gram += (self.ridge * np.trace(gram) / len(gram) + 1e-12) * np.eye(len(gram))
-            self.weights[b, length] = np.linalg.solve(gram, x.T @ y)
+            self.weights[b, length] = _ridge(x, y, self.ridge)
         return self.weights[b, length]
 
     def predict(self, b, before, length):
@@ -588,6 +583,14 @@ class _OwnMotion:
         """(windows, length, 3): what the fit misses there (rotation vectors)."""
         truth = self.quat(b)[before[:, None] + 1 + np.arange(length)]
         return _rotvec(_qmul(_qinv(self.predict(b, before, length)), truth))
+
+
+def _ridge(x, y, ridge):
+    """Least-squares weights of ``y`` on ``x`` with a ridge of ``ridge`` times the mean diagonal
+    of ``x.T @ x``, and a floor under it: a bone that stands still fits no turn at all."""
+    gram = x.T @ x
+    gram += (ridge * np.trace(gram) / len(gram) + 1e-12) * np.eye(len(gram))
+    return np.linalg.solve(gram, x.T @ y)
 
 
 def _spread(windows, most):
