@@ -313,7 +313,8 @@ def how_filled(choices, bone, first, last):
     and how far on towards the consensus: the knowledge base's motion and the take's own
     regression, or the regression alone without a knowledge base; on a short gap, the two fills
     whose mean the part it kept of the interpolation went part of the way to, where they agree,
-    and the share it went to the cubic where the take's copies favour it)
+    the share it went to the cubic where the take's copies favour it, and to ``learn`` where
+    the bone's own windows trust it)
     and the copies' estimate of its error as a share of the interpolation's (the largest where
     several, 0 where none judged it). No error in millimetres: an armature's copies foretell
     the share, not the level (docs/METHOD_NOTES.md, session 34)."""
@@ -329,6 +330,8 @@ def how_filled(choices, bone, first, last):
               + (f", the rest {CORROBORATE:.0%} to {c.corroborated}, which agree"
                  if c.corroborated else "")
               + (f", {c.cubic:.0%} to the cubic, which the take favours" if c.cubic else "")
+              + (f", {c.learnt:.0%} to learn, which the bone's windows trust"
+                 if c.learnt else "")
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0

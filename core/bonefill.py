@@ -90,7 +90,7 @@ from .motion import Motion, blend_into_gaps, gap_runs, skeleton_limbs, widened
 from .posing import best_rotation, child_handles, forward, gram_schmidt, order_bones, \
     rotation_between, solve_pose, tail_handles
 from .rig import aligned_turns, basis_matrices, basis_turns, bezier_channels, \
-    hermite_channels, hermite_rotations, interpolate_channels, learnable_runs, \
+    hermite_channels, hermite_rotations, interpolate_channels, learn_losses, learnable_runs, \
     learned_rotations, regress_channels
 from . import stacking
 
@@ -111,6 +111,12 @@ AUTO_CANDIDATES = ("match", "mix", "learn")
 #: bone's own interpolator gains on gaps of 0.125-0.25 s and loses from 0.5 s on the non-test
 #: takes; at a clip's end it holds the key; docs/METHOD_NOTES.md, session 61)
 LEARN_SECONDS = 0.4
+#: the part of such a gap that ``auto`` keeps of the interpolation goes this share of the way on
+#: to ``learn`` where the bone's own windows of the gap's length say that ``learn`` loses (by
+#: 10 % + 2 mm) no more than :data:`LEARN_TRUST` of them (hundreds per bone where the three
+#: copies of a gap are a noisy judge; docs/METHOD_NOTES.md, session 63)
+LEARN_PULL = 0.25
+LEARN_TRUST = 0.03
 #: how far ``mix`` goes from ``hermite`` towards ``match`` (tuned, docs/METHOD_NOTES.md)
 MIX_SHARE = 0.25
 AUTO_POSITIONS = ("knn", "half", "recall")
@@ -261,7 +267,8 @@ class GapChoice:
     fills (joined by " + ") whose mean the part of a short gap kept of the interpolation went
     :data:`CORROBORATE` of the way on to, where they agree on the gap ("": none); ``cubic``: how
     far the gap went towards the cubic (``hermite``) beside, where the take's copies favour it
-    (:data:`CUBIC_TRUST`; 0: not at all)."""
+    (:data:`CUBIC_TRUST`; 0: not at all); ``learnt``: how far it went towards ``learn``
+    beside, where the bone's own windows trust it (:data:`LEARN_TRUST`; 0: not at all)."""
 
     bone: str
     first: int
@@ -273,6 +280,7 @@ class GapChoice:
     towards: str = ""
     corroborated: str = ""
     cubic: float = 0.0
+    learnt: float = 0.0
 
 
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
@@ -363,11 +371,13 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     consensus = job.consensus or [0.0] * len(runs)
     corroborated = job.corroborated or [None] * len(runs)
     cubic = job.cubic or [0.0] * len(runs)
+    learnt = job.learnt or [0.0] * len(runs)
     towards = " + ".join(job.consensus_fills)
     return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate), further,
-                             towards if further else "", " + ".join(pair or ()), float(pulled))
-                   for (b, a, e), (name, share), estimate, further, pair, pulled
-                   in zip(runs, choices, estimates, consensus, corroborated, cubic)]
+                             towards if further else "", " + ".join(pair or ()), float(pulled),
+                             float(learn))
+                   for (b, a, e), (name, share), estimate, further, pair, pulled, learn
+                   in zip(runs, choices, estimates, consensus, corroborated, cubic, learnt)]
 
 
 class _Job:
@@ -386,6 +396,7 @@ class _Job:
         # auto's choice per gap, its estimate of it from the copies and how far the gap then
         # went on to the long-gap consensus (None: not auto)
         self.choices = self.estimates = self.consensus = self.corroborated = self.cubic = None
+        self.learnt = None
         # the fills auto stacks, and those its long gaps go on to: without a knowledge base,
         # the take's own
         self.stack_fills, self.long_fills = (
@@ -406,6 +417,10 @@ class _Job:
     def unknown(self, gaps):
         """(frames, joints) joints the gaps leave unknown."""
         return (gaps.astype(np.int64) @ self.below.astype(np.int64) > 0) | (gaps & self.own)
+
+    def metre_scale(self):
+        """Metres per unit of the rig."""
+        return float(np.cbrt(abs(np.linalg.det(self.to_metres[:3, :3]))))
 
     def world(self, basis):
         joints = self.rig.joints(basis)
@@ -703,6 +718,7 @@ class _Job:
         estimates = [float("nan")] * len(runs)
         expected = [float("nan")] * len(runs)  # the chosen fill's mean squared joint error
         pull = 0.0  # how far the kept interpolation of short gaps goes on to the cubic
+        trusted = [False] * len(runs)  # short gaps whose kept interpolation goes on to learn
         longest = [rotations and not self.short(a, e)
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
@@ -727,6 +743,12 @@ class _Job:
             learnable = set(learnable_runs(gaps, LEARN_KEYS))
             learns = np.array([e - a + 1 < LEARN_SECONDS * self.fps and (b, a, e) in learnable
                                for b, a, e in runs])
+            if LEARN_PULL and learns.any():  # how often learn loses the bone's windows
+                losses = learn_losses(seen[..., :3, :3], channels, self.rig.modes, gaps,
+                                      self.rig.levers(), LEARN_KEYS, LEARN_RIDGE,
+                                      plus=0.002 / self.metre_scale())
+                trusted = [learns[i] and losses.get(run, 1.0) <= LEARN_TRUST
+                           for i, run in enumerate(runs)]
             judged = np.zeros_like(gaps)
             for i, b, start, length in copies:
                 judged[start:start + length, b] = learns[i]
@@ -775,12 +797,14 @@ class _Job:
                         expected[i] = (estimates[i]
                                        * np.mean(np.sqrt(base[own] / samples[own]))) ** 2
         wanted = np.zeros_like(gaps)
-        for (b, a, e), (name, _) in zip(runs, choice):  # a short gap may take a pair's mean
-            wanted[a:e + 1, b] = name != "interp" or (stack and self.short(a, e))
+        for (b, a, e), (name, _), trust in zip(runs, choice, trusted):  # a short gap may take a
+            # pair's mean and learn
+            wanted[a:e + 1, b] = name != "interp" or (stack and self.short(a, e)) or trust
         corroborated = [None] * len(runs)
         if wanted.any():
             made = self.candidates(channels, location, wanted,
-                                   {name for name, _ in choice} | set(fills), seen,
+                                   {name for name, _ in choice} | set(fills)
+                                   | ({"learn"} if any(trusted) else set()), seen,
                                    learn_on=(gaps, wanted))
             if stack:
                 made["stack"] = self._stacked(made, wanted, self.stack_fills,
@@ -797,6 +821,8 @@ class _Job:
         self.choices, self.estimates, self.corroborated = choice, estimates, corroborated
         self.cubic = [pull * (1 - share) if share < 1 and self.short(a, e) else 0.0
                       for (_, a, e), (_, share) in zip(runs, choice)]
+        self.learnt = [LEARN_PULL * (1 - share) if trust else 0.0
+                       for trust, (_, share) in zip(trusted, choice)]
         onward = [agree if last else UNJUDGED_CONSENSUS * bool(agree) if unjudged_gap else 0.0
                   for last, unjudged_gap in zip(longest, unjudged)]
         self.consensus = [on if name != "interp"
@@ -824,14 +850,15 @@ class _Job:
         if not wanted.any():
             return seen
         out = seen.copy()
-        for (b, a, e), (name, share), further, pair, cubic in zip(
-                runs, choice, self.consensus, corroborated, self.cubic):
+        for (b, a, e), (name, share), further, pair, cubic, learnt in zip(
+                runs, choice, self.consensus, corroborated, self.cubic, self.learnt):
             rows = slice(a, e + 1)
-            if pair or cubic:  # about the interpolation: the fill's share, on the rest the
-                # pair's mean and the cubic
+            if pair or cubic or learnt:  # about the interpolation: the fill's share, on the
+                # rest the pair's mean, the cubic and learn
                 out[rows, b] = _about(seen[rows, b], [(made[name][rows, b], share)] + [
                     (made[key][rows, b], CORROBORATE * (1 - share) / 2) for key in pair or ()]
-                    + [(made["hermite"][rows, b], cubic)])
+                    + [(made[key][rows, b], weight) for key, weight
+                       in (("hermite", cubic), ("learn", learnt)) if weight])
                 continue
             if name == "interp" or not share:
                 continue

@@ -108,6 +108,19 @@ class Rig:
             out.append([c for c in sorted(found - {b}) if self.parents[c] >= 0])
         return out
 
+    def levers(self):
+        """(bones, 3, 3): per bone ``M`` with ``w @ M @ w`` the mean squared move of the joints
+        it places (in the rest pose; zeros where it places none) when its basis rotation is off
+        by a small rotation vector ``w``: how a bone's turn shows in the joints."""
+        n = len(self.names)
+        rest_joints = self.joints(np.tile(np.eye(4), (1, n, 1, 1)))[0]
+        out = np.zeros((n, 3, 3))
+        for b, placed in enumerate(self.placed_by()):
+            z = (rest_joints[placed] - self.rest[b, :3, 3]) @ self.rest[b, :3, :3]
+            if len(z):
+                out[b] = (np.sum(z * z) * np.eye(3) - z.T @ z) / len(z)
+        return out
+
     def moved(self, gaps):
         """(frames, joints) bool: the joints that the bones gapped in ``gaps`` (frames, bones)
         move at each frame."""
@@ -518,6 +531,39 @@ def learned_rotations(turns, gaps, keys=4, ridge=0.0, near=None, body_ridges=(0.
                 now = np.concatenate([own.missed(f, key, length)[0] for f in others], axis=1)
                 filled = _qmul(filled, _quat(now @ weights))
         out[a:e + 1, b] = Rotation.from_quat(filled).as_matrix()
+    return out
+
+
+def learn_losses(turns, channels, modes, gaps, levers, keys=4, ridge=0.0, most=200, worse=1.1,
+                 plus=0.002):
+    """Per gap of :func:`learnable_runs` ``(bone, first, last)``: the share of the bone's windows
+    of the gap's length (keyed throughout, with keys beyond: those :func:`learned_rotations`
+    fits on) where the bone's own fit moves the joints it places (``levers``,
+    :meth:`Rig.levers`; RMS over them and the window) further from the truth than Blender's
+    interpolation of the rotation ``channels`` (``modes``) does, by ``worse`` times and ``plus``
+    (the rig's units) more: how often the take says ``learn`` loses a gap like it."""
+    own = _OwnMotion(turns, gaps, keys, ridge, most)
+    out, shares = {}, {}
+    for b, a, e in learnable_runs(gaps, keys):
+        length = e - a + 1
+        if (b, length) not in shares:
+            starts = own.windows(b, length)
+            steps = np.arange(1, length + 1) / (length + 1)
+            keyed = channels[:, b]
+            line = keyed[starts, None] + (keyed[starts + length + 1] - keyed[starts])[:, None] \
+                * steps[None, :, None]
+            turned = rotations(line.reshape(-1, 1, keyed.shape[-1]), [modes[b]])[:, 0]
+            lerp = Rotation.from_matrix(turned).as_quat().reshape(len(starts), length, 4)
+            truth = own.quat(b)[starts[:, None] + 1 + np.arange(length)]
+
+            def rms(turn):
+                return np.sqrt(np.einsum("wti,ij,wtj->w", turn, levers[b], turn) / length)
+
+            learnt = rms(own.missed(b, starts, length))
+            linear = rms(_rotvec(_qmul(_qinv(lerp), truth)))
+            shares[b, length] = (float(np.mean(learnt > worse * linear + plus))
+                                 if len(starts) else 1.0)
+        out[b, a, e] = shares[b, length]
     return out
 
 
