@@ -685,7 +685,9 @@ class _Job:
         that gaps of other bones overlap (``match`` sees less of the body there), and
         interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`); where
         all the take's copies together favour the cubic (:data:`CUBIC_TRUST`), the part a
-        short gap kept of the interpolation goes part of the way on to ``hermite``. Last,
+        short gap kept of the interpolation goes part of the way on to ``hermite``, and
+        :data:`LEARN_PULL` of it on to ``learn`` where ``learn`` is judged and the bone's own
+        windows of the gap's length trust it (:data:`LEARN_TRUST`). Last,
         each gap of :data:`LONG_STACK` seconds or more (where ``stack_long`` is made) that
         does not keep the interpolation goes :data:`CONSENSUS` of the way on from its fill to
         the mean of :data:`CONSENSUS_FILLS`, and in a take without copies every other gap of
@@ -846,7 +848,10 @@ class _Job:
             + (f"; the interpolated part of {pairs} short gaps {CORROBORATE:.0%} of the way on to "
                "two fills that agree there" if pairs else "")
             + (f"; the interpolated part of the short gaps {pull:.0%} of the way on to the cubic, "
-               "which the take's copies favour" if any(self.cubic) else ""))
+               "which the take's copies favour" if any(self.cubic) else "")
+            + (f"; the interpolated part of {sum(map(bool, self.learnt))} short gaps "
+               f"{LEARN_PULL:.0%} of the way on to learn, which the bone's own windows trust"
+               if any(self.learnt) else ""))
         if not wanted.any():
             return seen
         out = seen.copy()
