@@ -548,23 +548,27 @@ def learn_losses(turns, channels, modes, gaps, levers, keys=4, ridge=0.0, most=2
         length = e - a + 1
         if (b, length) not in shares:
             starts = own.windows(b, length)
-            steps = np.arange(1, length + 1) / (length + 1)
-            keyed = channels[:, b]
-            line = keyed[starts, None] + (keyed[starts + length + 1] - keyed[starts])[:, None] \
-                * steps[None, :, None]
-            turned = rotations(line.reshape(-1, 1, keyed.shape[-1]), [modes[b]])[:, 0]
-            lerp = Rotation.from_matrix(turned).as_quat().reshape(len(starts), length, 4)
-            truth = own.quat(b)[starts[:, None] + 1 + np.arange(length)]
-
-            def rms(turn):
-                return np.sqrt(np.einsum("wti,ij,wtj->w", turn, levers[b], turn) / length)
-
-            learnt = rms(own.missed(b, starts, length))
-            linear = rms(_rotvec(_qmul(_qinv(lerp), truth)))
-            shares[b, length] = (float(np.mean(learnt > worse * linear + plus))
-                                 if len(starts) else 1.0)
+            shares[b, length] = 1.0
+            if len(starts):
+                steps = np.arange(1, length + 1) / (length + 1)
+                keyed = channels[:, b]
+                line = (keyed[starts, None] + (keyed[starts + length + 1] - keyed[starts])[:, None]
+                        * steps[None, :, None])
+                lerp = Rotation.from_matrix(rotations(line.reshape(-1, 1, keyed.shape[-1]),
+                                                      [modes[b]])[:, 0]).as_quat()
+                truth = own.quat(b)[starts[:, None] + 1 + np.arange(length)]
+                linear = _rotvec(_qmul(_qinv(lerp.reshape(truth.shape)), truth))
+                learnt = own.missed(b, starts, length)
+                shares[b, length] = float(np.mean(_lever_rms(learnt, levers[b])
+                                                  > worse * _lever_rms(linear, levers[b]) + plus))
         out[b, a, e] = shares[b, length]
     return out
+
+
+def _lever_rms(turns, lever):
+    """(windows,): the RMS move of the joints ``lever`` (:meth:`Rig.levers`) carries for the
+    turns (windows, frames, 3) off the truth."""
+    return np.sqrt(np.einsum("wti,ij,wtj->w", turns, lever, turns) / turns.shape[1])
 
 
 def _body_weights(x, y, ridges):
