@@ -855,15 +855,15 @@ class _Job:
         if not wanted.any():
             return seen
         out = seen.copy()
-        for (b, a, e), (name, share), further, pair, cubic, learnt in zip(
+        for (b, a, e), (name, share), further, pair, cubic, to_learn in zip(
                 runs, choice, self.consensus, corroborated, self.cubic, self.learnt):
             rows = slice(a, e + 1)
-            if pair or cubic or learnt:  # about the interpolation: the fill's share, on the
+            if pair or cubic or to_learn:  # about the interpolation: the fill's share, on the
                 # rest the pair's mean, the cubic and learn
                 out[rows, b] = _about(seen[rows, b], [(made[name][rows, b], share)] + [
                     (made[key][rows, b], CORROBORATE * (1 - share) / 2) for key in pair or ()]
                     + [(made[key][rows, b], weight) for key, weight
-                       in (("hermite", cubic), ("learn", learnt)) if weight])
+                       in (("hermite", cubic), ("learn", to_learn)) if weight])
                 continue
             if name == "interp" or not share:
                 continue
