@@ -556,7 +556,7 @@ def learn_losses(turns, channels, modes, gaps, levers, keys=4, ridge=0.0, most=2
                         * steps[None, :, None])
                 lerp = Rotation.from_matrix(rotations(line.reshape(-1, 1, keyed.shape[-1]),
                                                       [modes[b]])[:, 0]).as_quat()
-                truth = own.quat(b)[starts[:, None] + 1 + np.arange(length)]
+                truth = own.truth(b, starts, length)
                 linear = _rotvec(_qmul(_qinv(lerp.reshape(truth.shape)), truth))
                 learnt = own.missed(b, starts, length)
                 shares[b, length] = float(np.mean(_lever_rms(learnt, levers[b])
@@ -629,10 +629,13 @@ class _OwnMotion:
                          _learned_terms(q, before, length, self.keys))
         return _off_slerp(q, before, length, turn)
 
+    def truth(self, b, before, length):
+        """(windows, length, 4): the take's quaternions on the windows after ``before``."""
+        return self.quat(b)[before[:, None] + 1 + np.arange(length)]
+
     def missed(self, b, before, length):
         """(windows, length, 3): what the fit misses there (rotation vectors)."""
-        truth = self.quat(b)[before[:, None] + 1 + np.arange(length)]
-        return _rotvec(_qmul(_qinv(self.predict(b, before, length)), truth))
+        return _rotvec(_qmul(_qinv(self.predict(b, before, length)), self.truth(b, before, length)))
 
 
 def _ridge(x, y, ridge):
