@@ -79,6 +79,7 @@ body goes): ``knn`` and ``auto`` give their gaps ``hermite``'s curve (``knn``) o
 the interpolation (``auto`` decides per gap like any other).
 """
 
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -139,6 +140,13 @@ LONG_STACK_FILLS = STACK_FILLS + ("regress_pose", "regress_kernel")
 #: little (chosen on non-test takes, docs/METHOD_NOTES.md, session 35)
 CONSENSUS = 0.5
 CONSENSUS_FILLS = ("match", "regress_kernel")
+#: in a take with copies, a gap from :data:`LEARN_SECONDS` up to ``MID_LEARN_SECONDS`` with keys
+#: beyond its keys (too long for ``learn`` to be judged) goes this share of the way on from its
+#: fill to ``learn``, the bone's own interpolator: alone it carries the keys' motion too far at
+#: that length, a part of it steadies whatever the copies chose (chosen on non-test takes,
+#: docs/METHOD_NOTES.md, session 64: at 0.67 s it lost gaps, at 1 s it did not pay)
+MID_LEARN = 0.2
+MID_LEARN_SECONDS = 0.6
 #: where the take has copies, every gap shorter than :data:`LONG_STACK` goes from ``interp``
 #: towards the chosen fill only as far as the stacked fills agree on the gap
 #: (:meth:`_Job._doubted`): the weight of their spread against the departure from ``interp``
@@ -372,12 +380,13 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     corroborated = job.corroborated or [None] * len(runs)
     cubic = job.cubic or [0.0] * len(runs)
     learnt = job.learnt or [0.0] * len(runs)
-    towards = " + ".join(job.consensus_fills)
+    towards = job.towards or [()] * len(runs)
     return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate), further,
-                             towards if further else "", " + ".join(pair or ()), float(pulled),
-                             float(learn))
-                   for (b, a, e), (name, share), estimate, further, pair, pulled, learn
-                   in zip(runs, choices, estimates, consensus, corroborated, cubic, learnt)]
+                             " + ".join(onto) if further else "", " + ".join(pair or ()),
+                             float(pulled), float(learn))
+                   for (b, a, e), (name, share), estimate, further, onto, pair, pulled, learn
+                   in zip(runs, choices, estimates, consensus, towards, corroborated, cubic,
+                          learnt)]
 
 
 class _Job:
@@ -396,7 +405,7 @@ class _Job:
         # auto's choice per gap, its estimate of it from the copies and how far the gap then
         # went on to the long-gap consensus (None: not auto)
         self.choices = self.estimates = self.consensus = self.corroborated = self.cubic = None
-        self.learnt = None
+        self.learnt = self.towards = None
         # the fills auto stacks, and those its long gaps go on to: without a knowledge base,
         # the take's own
         self.stack_fills, self.long_fills = (
@@ -727,6 +736,12 @@ class _Job:
         # in a take without copies, a long gap match fills unjudged goes on to the consensus
         unjudged = [rotations and not alone and not copies and (e - a + 1) >= LONG_GAP * self.fps
                     for _, a, e in runs]
+        # gaps a little too long for learn to be judged, with keys beyond their keys, go part
+        # of the way on to it
+        learnable = set(learnable_runs(gaps, LEARN_KEYS))
+        mid = [rotations and bool(copies) and (b, a, e) in learnable
+               and LEARN_SECONDS * self.fps <= e - a + 1 < MID_LEARN_SECONDS * self.fps
+               for b, a, e in runs]
         fills = self.long_fills if any(longest) else self.stack_fills if stack else ()
         if any(unjudged):
             fills += tuple(f for f in self.consensus_fills if f not in fills)
@@ -742,7 +757,6 @@ class _Job:
             hidden_loc = np.where((probe & self.moves)[..., None],
                                   interpolate_channels(location, probe), location)
             # learn only where it is judged: short gaps with keys beyond their keys, and copies
-            learnable = set(learnable_runs(gaps, LEARN_KEYS))
             learns = np.array([e - a + 1 < LEARN_SECONDS * self.fps and (b, a, e) in learnable
                                for b, a, e in runs])
             if LEARN_PULL and learns.any():  # how often learn loses the bone's windows
@@ -802,12 +816,15 @@ class _Job:
         for (b, a, e), (name, _), trust in zip(runs, choice, trusted):  # a short gap may take a
             # pair's mean and learn
             wanted[a:e + 1, b] = name != "interp" or (stack and self.short(a, e)) or trust
-        corroborated = [None] * len(runs)
+        corroborated, made = [None] * len(runs), {}
+        learn_mask = wanted.copy()  # learn fills these too; match's context is the gaps it fills
+        for (b, a, e), middle in zip(runs, mid):
+            learn_mask[a:e + 1, b] |= middle
+        with_learn = {"learn"} if any(trusted) or any(mid) else set()
         if wanted.any():
             made = self.candidates(channels, location, wanted,
-                                   {name for name, _ in choice} | set(fills)
-                                   | ({"learn"} if any(trusted) else set()), seen,
-                                   learn_on=(gaps, wanted))
+                                   {name for name, _ in choice} | set(fills) | with_learn, seen,
+                                   learn_on=(gaps, learn_mask))
             if stack:
                 made["stack"] = self._stacked(made, wanted, self.stack_fills,
                                               lambda b, a: table)
@@ -818,6 +835,10 @@ class _Job:
                                                    lambda b, a: long_table)
             if rotations and not alone and not copies:
                 choice = self._outvoted(channels, location, wanted, seen, made, runs, choice)
+        elif any(mid):
+            made = self.candidates(channels, location, learn_mask, with_learn, seen,
+                                   learn_on=(gaps, learn_mask))
+        wanted = learn_mask
         towards = self.consensus_fills
         agree = CONSENSUS if wanted.any() and set(towards) <= set(made) else 0.0
         self.choices, self.estimates, self.corroborated = choice, estimates, corroborated
@@ -830,15 +851,20 @@ class _Job:
         self.consensus = [on if name != "interp"
                           and (share < 1 or set(towards) != {name}) else 0.0  # there already
                           for (name, share), on in zip(choice, onward)]
+        self.consensus = [MID_LEARN if middle else on for on, middle in zip(self.consensus, mid)]
+        self.towards = [("learn",) if middle else towards if on else ()
+                        for on, middle in zip(self.consensus, mid)]
         counts, partly = {}, {}
         for name, share in choice:
             name = name if share else "interp"  # doubted all the way back
             counts[name] = counts.get(name, 0) + 1
             partly[name] = partly.get(name, 0) + (0 < share < 1)
         onwards = "; ".join(
-            f"{n} long gaps {'to the mean of' if on == 1 else f'{on:.0%} of the way on to'} "
-            f"{' + '.join(towards)}"
-            for on, n in zip(*np.unique([on for on in self.consensus if on], return_counts=True)))
+            f"{n} {'long' if onto == towards else 'mid-length'} gaps "
+            f"{'to the mean of' if on == 1 else f'{on:.0%} of the way on to'} {' + '.join(onto)}"
+            for (on, onto), n in Counter((on, onto) for on, onto in zip(self.consensus,
+                                                                        self.towards) if on
+                                         ).items())
         pairs = sum(pair is not None for pair in corroborated)
         self.report("auto: " + ", ".join(
             f"{name} on {n} of {len(runs)} gaps"
@@ -855,23 +881,23 @@ class _Job:
         if not wanted.any():
             return seen
         out = seen.copy()
-        for (b, a, e), (name, share), further, pair, cubic, to_learn in zip(
-                runs, choice, self.consensus, corroborated, self.cubic, self.learnt):
-            rows = slice(a, e + 1)
+        for (b, a, e), (name, share), further, onto, pair, cubic, to_learn in zip(
+                runs, choice, self.consensus, self.towards, corroborated, self.cubic,
+                self.learnt):
+            rows, span = slice(a, e + 1), np.ones((e - a + 1, 1), bool)
             if pair or cubic or to_learn:  # about the interpolation: the fill's share, on the
                 # rest the pair's mean, the cubic and learn
-                out[rows, b] = _about(seen[rows, b], [(made[name][rows, b], share)] + [
+                fill = _about(seen[rows, b], [(made[name][rows, b], share)] + [
                     (made[key][rows, b], CORROBORATE * (1 - share) / 2) for key in pair or ()]
                     + [(made[key][rows, b], weight) for key, weight
-                       in (("hermite", cubic), ("learn", to_learn)) if weight])
-                continue
-            if name == "interp" or not share:
-                continue
-            span = np.ones((e - a + 1, 1), bool)
-            fill = halfway(seen[rows, b:b + 1], made[name][rows, b:b + 1], span, share)
+                       in (("hermite", cubic), ("learn", to_learn)) if weight])[:, None]
+            elif name != "interp" and share:
+                fill = halfway(seen[rows, b:b + 1], made[name][rows, b:b + 1], span, share)
+            else:
+                fill = seen[rows, b:b + 1]
             if further:  # the mean of the fills, each of k taking 1/k of the way
-                target = made[towards[0]][rows, b:b + 1]
-                for k, key in enumerate(towards[1:], 2):
+                target = made[onto[0]][rows, b:b + 1]
+                for k, key in enumerate(onto[1:], 2):
                     target = halfway(target, made[key][rows, b:b + 1], span, 1 / k)
                 fill = halfway(fill, target, span, further)
             out[rows, b] = fill[:, 0]
