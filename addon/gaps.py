@@ -309,12 +309,12 @@ def how_filled(choices, bone, first, last):
     """``(how, estimate, 0)`` of a listed gap of ``bone`` over the take's rows ``first``-``last``
     from the rotation fill's choices of the gaps it overlaps: the fill (``interp``: Blender's
     interpolation kept, also where the copies' fill was doubted all the way back to it; with
-    the share of the way from it where the fill went part of the way,
-    and how far on towards the consensus: the knowledge base's motion and the take's own
-    regression, or the regression alone without a knowledge base; on a short gap, the two fills
-    whose mean the part it kept of the interpolation went part of the way to, where they agree,
-    the share it went to the cubic where the take's copies favour it, and to ``learn`` where
-    the bone's own windows trust it)
+    the share of the way from it where the fill went part of the way; on a short gap, the two
+    fills whose mean the part it kept of the interpolation went part of the way to, where they
+    agree, the share it went to the cubic where the take's copies favour it, and to ``learn``
+    where the bone's own windows trust it; last, how far it then went on towards the consensus
+    of a long gap: the knowledge base's motion and the take's own regression, or the
+    regression alone without a knowledge base, or towards ``learn`` on a gap of 0.4-0.6 s)
     and the copies' estimate of its error as a share of the interpolation's (the largest where
     several, 0 where none judged it). No error in millimetres: an armature's copies foretell
     the share, not the level (docs/METHOD_NOTES.md, session 34)."""
@@ -325,13 +325,13 @@ def how_filled(choices, bone, first, last):
         return "", 0.0, 0.0
     labels = [("interp" if c.share == 0 else c.method if c.share == 1
                else f"{c.method} ({c.share:.0%} of the way)")
-              + (f", then the mean of {c.towards}" if c.consensus == 1 else
-                 f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
               + (f", the rest {CORROBORATE:.0%} to {c.corroborated}, which agree"
                  if c.corroborated else "")
               + (f", {c.cubic:.0%} to the cubic, which the take favours" if c.cubic else "")
               + (f", {c.learnt:.0%} to learn, which the bone's windows trust"
                  if c.learnt else "")
+              + (f", then the mean of {c.towards}" if c.consensus == 1 else
+                 f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0
