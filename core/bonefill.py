@@ -59,7 +59,9 @@ frames:
   only as far as the fills agree on the gap, and as far as it departs from ``interp`` beyond
   the error its copies expect of it (``AUTO_WARY``), and the part of the interpolation such a
   gap keeps goes half way on to the mean of two stacked fills that agree on it (``CORROBORATE``:
-  two estimates from different evidence bearing each other out); in a take too short for
+  two estimates from different evidence bearing each other out); a gap of 0.4 s up to
+  ``MID_LEARN_SECONDS`` (0.6 s) with keys beyond its keys then goes ``MID_LEARN`` (a fifth) of
+  the way on to ``learn``, too long to be judged by the copies there; in a take too short for
   copies, a long gap keeps ``interp`` where it and ``regress`` agree far more closely than
   either does with ``match``, and takes the mean of ``match`` and ``regress_kernel`` where
   ``match`` would fill it unjudged (``UNJUDGED_CONSENSUS``);
@@ -696,7 +698,9 @@ class _Job:
         all the take's copies together favour the cubic (:data:`CUBIC_TRUST`), the part a
         short gap kept of the interpolation goes part of the way on to ``hermite``, and
         :data:`LEARN_PULL` of it on to ``learn`` where ``learn`` is judged and the bone's own
-        windows of the gap's length trust it (:data:`LEARN_TRUST`). Last,
+        windows of the gap's length trust it (:data:`LEARN_TRUST`); a gap from
+        :data:`LEARN_SECONDS` up to :data:`MID_LEARN_SECONDS` with keys beyond its keys, in a
+        take with copies, goes :data:`MID_LEARN` of the way on from its fill to ``learn``. Last,
         each gap of :data:`LONG_STACK` seconds or more (where ``stack_long`` is made) that
         does not keep the interpolation goes :data:`CONSENSUS` of the way on from its fill to
         the mean of :data:`CONSENSUS_FILLS`, and in a take without copies every other gap of
