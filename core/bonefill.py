@@ -852,10 +852,9 @@ class _Job:
                        for trust, (_, share) in zip(trusted, choice)]
         onward = [agree if last else UNJUDGED_CONSENSUS * bool(agree) if unjudged_gap else 0.0
                   for last, unjudged_gap in zip(longest, unjudged)]
-        self.consensus = [on if name != "interp"
+        self.consensus = [MID_LEARN if middle else on if name != "interp"
                           and (share < 1 or set(towards) != {name}) else 0.0  # there already
-                          for (name, share), on in zip(choice, onward)]
-        self.consensus = [MID_LEARN if middle else on for on, middle in zip(self.consensus, mid)]
+                          for (name, share), on, middle in zip(choice, onward, mid)]
         self.towards = [("learn",) if middle else towards if on else ()
                         for on, middle in zip(self.consensus, mid)]
         counts, partly = {}, {}
