@@ -5,6 +5,7 @@ which only sees arrays.
 """
 
 import os
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -368,9 +369,11 @@ def describe(gap, armature):
     if armature and gap.how == "interp":  # judged by copies: the fill doubted all the way back
         return ["Blender's interpolation kept", "(the copies' best fill moved it less than its "
                 "own error)" if gap.estimate else "(no fill was judged better there)"]
-    if armature:  # the long-gap consensus on a line of its own (the panel is narrow)
-        first, *then = gap.how.split(", then ")
-        return [f"filled by {first}"] + [f"then {line}" for line in then] + (
+    if armature:  # each step after the fill on a line of its own (the panel is narrow): the
+        # rest of a short gap to an agreeing pair, the shares to the cubic and to learn, the
+        # consensus
+        first, *then = re.split(r", (?=then |the rest |\d+% to )", gap.how)
+        return [f"filled by {first}"] + then + (
             [f"copies: {gap.estimate:.2f} of the interpolation's error"] if gap.estimate else [])
     return [f"from {gap.how}"] + (
         [f"copies: about {gap.expected_mm:.0f} mm RMS error"] if gap.expected_mm else [])

@@ -12,6 +12,7 @@ import hashlib
 import shutil
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -127,6 +128,14 @@ def test_an_armature_gap_names_the_fills_it_went_to(extension):
         "learn (40% of the way), 15% to learn, which the bone's windows trust")
     assert gaps.how_filled(choices, "lShldr", 130, 189)[0] == (
         "stack (50% of the way), the rest 50% to hermite + match, which agree, then 20% to learn")
+    # the panel is narrow: each step after the fill on a line of its own
+    listed = SimpleNamespace(how=gaps.how_filled(choices, "lShldr", 10, 24)[0], estimate=0.6)
+    assert gaps.describe(listed, True) == [
+        "filled by mix (50% of the way)", "the rest 50% to hermite + regress, which agree",
+        "15% to the cubic, which the take favours", "copies: 0.60 of the interpolation's error"]
+    listed.how = gaps.how_filled(choices, "lShldr", 130, 189)[0]
+    assert gaps.describe(listed, True)[1:3] == [
+        "the rest 50% to hermite + match, which agree", "then 20% to learn"]
 
 
 def test_blend_run_names_the_marker_gaps_to_review_first(scene, data_dir, marker_kb, tmp_path):
