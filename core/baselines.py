@@ -57,6 +57,11 @@ CARRIED_PAD = 3
 #: (gap, donor set) pairs times frames that the search for the gaps' nearest references looks at
 #: in one batch
 NEAREST_CHUNK = 1 << 20
+#: :func:`fill_learned`: frames beyond each gap end it reads, windows a point it fits on at
+#: most, and the fewest windows of a gap's length it fits on (docs/METHOD_NOTES.md, session 65)
+LEARNED_KEYS = 4
+LEARNED_WINDOWS = 400
+LEARNED_LEAST = 20
 
 
 def fill_linear(pos):
@@ -81,6 +86,75 @@ def fill_spline(pos):
         first, last = t[ok][0], t[ok][-1]
         out[~ok, p] = spline(np.clip(t[~ok], first, last))
     return out
+
+
+def fill_learned(pos, spline=None, only=None, keys=LEARNED_KEYS, most=LEARNED_WINDOWS):
+    """Each gap (both ends in the take, with ``keys`` seen frames beyond each end) as the take's
+    points move on from their keys: on each gap frame, the straight line between the frames
+    either side plus an offset linear in the step between them and in the steps from each to
+    ``keys`` frames beyond it, one weight per term and frame shared by the three axes and by every
+    point, fitted by least squares on the take's own windows of the gap's length where a point is
+    seen throughout (every other one, at most ``most`` a point, spread over the take). A natural
+    spline is one such linear rule fixed in advance; this one takes what the take's motion
+    favours (a jittering marker smooths its keys, a swinging hand carries them on). Only the gaps
+    that start in ``only`` ((frames, points) bool; default every gap); the others, and every gap
+    where fewer than :data:`LEARNED_LEAST` windows fit, take ``spline`` (default
+    :func:`fill_spline` of ``pos``)."""
+    pos = np.asarray(pos, dtype=np.float64)
+    out = fill_spline(pos) if spline is None else np.array(spline, dtype=np.float64)
+    missing = np.isnan(pos[..., 0])
+    frames = len(pos)
+    hidden = np.concatenate([np.zeros((1, pos.shape[1]), int), np.cumsum(missing, axis=0)])
+    weights = {}  # per gap length
+    for p, a, b in gap_runs(missing):
+        length = b - a + 1
+        if (only is not None and not only[a, p]) or (
+                a - 1 - keys < 0 or b + 1 + keys >= frames or missing[a - 1 - keys:a, p].any()
+                or missing[b + 1:b + 2 + keys, p].any()):
+            continue
+        if length not in weights:
+            before = np.arange(keys, frames - length - 1 - keys)  # the frame before each window
+            seen = hidden[before + length + 2 + keys] == hidden[before - keys]
+            terms, offsets = [], []
+            for q in range(pos.shape[1]):
+                windows = before[seen[:, q]][::2]
+                if len(windows) > most:
+                    windows = windows[np.linspace(0, len(windows) - 1, most).round().astype(int)]
+                terms.append(_learned_terms(pos[:, q], windows, length, keys))
+                offsets.append(_off_line(pos[:, q], windows, length))
+            x = np.concatenate(terms).transpose(0, 2, 1).reshape(-1, 2 * keys + 1)
+            y = np.concatenate(offsets).transpose(0, 2, 1).reshape(-1, length)
+            gram = x.T @ x
+            gram += (1e-12 * np.trace(gram) / len(gram) + 1e-15) * np.eye(len(gram))
+            weights[length] = (np.linalg.solve(gram, x.T @ y) if len(x) >= 3 * LEARNED_LEAST
+                               else None)
+        if weights[length] is None:
+            continue
+        before = np.array([a - 1])
+        line = pos[a - 1, p] + np.arange(1, length + 1)[:, None] / (length + 1) * (
+            pos[b + 1, p] - pos[a - 1, p])
+        out[a:b + 1, p] = line + weights[length].T @ _learned_terms(pos[:, p], before, length,
+                                                                    keys)[0]
+    return out
+
+
+def _learned_terms(track, before, length, keys):
+    """(windows, 2 keys + 1, 3): for windows of ``length`` frames after the frames ``before`` of
+    one point's ``track``, the step across the window and the steps from its frames either side
+    to ``keys`` frames beyond each."""
+    first, last = track[before], track[before + length + 1]
+    steps = ([last - first] + [track[before - j] - first for j in range(1, keys + 1)]
+             + [track[before + length + 1 + j] - last for j in range(1, keys + 1)])
+    return np.stack(steps, axis=1)
+
+
+def _off_line(track, before, length):
+    """(windows, length, 3): the track over those windows less the straight line between the
+    frames either side."""
+    first, last = track[before], track[before + length + 1]
+    along = np.arange(1, length + 1)[None, :, None] / (length + 1)
+    return (track[before[:, None] + 1 + np.arange(length)]
+            - (first[:, None] + along * (last - first)[:, None]))
 
 
 def fill_svt(pos, rank_fraction=0.02, iterations=200, tol=1e-5):

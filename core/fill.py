@@ -100,6 +100,12 @@ AUTO_OFF_SPLINE = 2.0
 #: docs/METHOD_NOTES.md, session 56: 2, 4, 8 and leaving the fill out gained 0.6-1.2 %, the
 #: losses growing with it)
 AUTO_GONE_DOUBT = 4.0
+#: on a marker set, the smooth track through the take that all of the above weigh (the
+#: spline) goes this share of the way on to the take's own interpolator
+#: (:func:`~.baselines.fill_learned`: the take's windows of each gap's length say how its
+#: markers move on from their keys; chosen on the tuning takes, docs/METHOD_NOTES.md, session
+#: 65: the whole way gained as much on the mean and lost more on some takes)
+AUTO_LEARNED = 0.5
 #: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
 #: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
 #: went astray on the tuning takes, where the partner's pattern carries them: docs/METHOD_NOTES.md,
@@ -139,7 +145,8 @@ class GapAccount:
     regressed, :func:`~.regression.regress_in_frame`), ``models`` (the knowledge base's local
     models), ``windows``
     (the knowledge base's windows of motion), ``own`` (the take's own regression on the rest of
-    the body), ``spline`` (a spline through the take, short gaps), ``pattern`` (a partner's
+    the body), ``spline`` (a spline through the take, short gaps; on a marker set half of the
+    way on to the take's own interpolator, :func:`_smooth_of`), ``pattern`` (a partner's
     pattern: short gaps, and a point's long gaps within the knowledge base's side); on a marker
     set the rigid partners' share is their mean over the gap's frames (:func:`_by_steadiness`).
     Where an estimate has no value at some frame (no rigid donors there) the others fill it
@@ -331,7 +338,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     pattern by their errors on copies of each gap (:func:`_with_spline`), those at a clip end
     with the pattern from the one end alone, by errors on one-sided copies
     (:func:`_with_pattern_ends`); holes no estimate reached (dropped frames without a knowledge
-    base) take the spline alone (:func:`_with_holes_splined`). Last, the fill is moved onto
+    base) take the spline alone (:func:`_with_holes_splined`). On a marker set that spline goes
+    half of the way on to the take's own interpolator (:func:`~.baselines.fill_learned`: the
+    take's windows of a gap's length say how its markers move on from their keys) over short
+    gaps and where most of the body is gone (:func:`_learnt`). Last, the fill is moved onto
     the distances the take keeps exactly, on a marker set towards those it keeps within a few
     millimetres (:func:`_with_distances_kept`).
     """
@@ -506,10 +516,12 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             knn_copies = _mix_in(_mix_in(_mix_in(knn_copies, matched, windows), regressed, own),
                                  patterned, by_partner)
         copies = _blend(knn_copies, on_copies, weight)
-        spline = baselines.fill_spline(motion.positions)
+        smooth = _smooth_of(motion)
+        learnt, learnt_copies = _learnt(missing, probe, motion.fps)
+        spline = smooth(motion.positions, learnt)
         # the spline with the copies hidden, for the longer gaps (none: a take of short dropouts)
-        hidden_spline = (baselines.fill_spline(np.where(probe[..., None], np.nan,
-                                                        motion.positions))
+        hidden_spline = (smooth(np.where(probe[..., None], np.nan, motion.positions),
+                                learnt_copies)
                          if _longer_gaps(missing, motion.fps) else None)
         with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
@@ -884,9 +896,10 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     :data:`AUTO_GONE_DOUBT` times over (its copies saw more of the body). Returns the
     blend and, per gap blended (``(point, first frame)``), the spline's and the pattern's shares
     and the blend's expected squared error (the errors as if independent)."""
-    from .baselines import fill_pattern, fill_spline
+    from .baselines import fill_pattern
 
     missing = motion.missing
+    smooth = _smooth_of(motion)
     # copy k of every gap goes into round k: copies of one round never meet, those of one gap
     # never overlap, and all lie within AUTO_SPLINE_REACH gap lengths of their gap
     rounds, copies = np.zeros((AUTO_SPLINE_COPIES,) + missing.shape, bool), []
@@ -914,7 +927,7 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     def hide(hidden):
         return np.where(hidden[..., None], np.nan, motion.positions)
 
-    error = _round_errors(rounds, motion.positions, lambda hidden: fill_spline(hide(hidden)))
+    error = _round_errors(rounds, motion.positions, lambda hidden: smooth(hide(hidden), hidden))
     pattern_error = _round_errors(rounds, motion.positions, lambda hidden: fill_pattern(
         hide(hidden), only=hidden, cache=donors))
     # where the rigid estimate alone fills a point, it is scored on the spline's own copies
@@ -945,6 +958,38 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
                f"more than the other estimates, a partner's pattern a quarter or more of "
                f"{patterned}")
     return out, shares
+
+
+def _smooth_of(motion):
+    """The smooth track through the take's gaps that ``auto`` weighs, ``smooth(positions,
+    only)`` of positions with NaN gaps: a cubic spline of each point
+    (:func:`~.baselines.fill_spline`), on a marker set :data:`AUTO_LEARNED` of the way on to the
+    take's own interpolator (:func:`~.baselines.fill_learned`) on the gaps that start in
+    ``only``."""
+    def smooth(positions, only):
+        spline = baselines.fill_spline(positions)
+        if motion.parents is not None or not only.any():
+            return spline
+        return spline + AUTO_LEARNED * (baselines.fill_learned(positions, spline, only) - spline)
+
+    return smooth
+
+
+def _learnt(missing, probe, fps):
+    """Where ``auto``'s smooth track takes in the take's own interpolator (:func:`_smooth_of`),
+    the gaps of ``missing`` and the copies ``probe`` ((frames, points) bool, at their first
+    frames): every one of up to :data:`AUTO_SPLINE_SECONDS`, and a longer gap where more than
+    :data:`AUTO_BODY_GONE` of the points are gone (over half a second with few points gone its
+    copies vouched for it more than the gaps bore out), with the longer copies of its point."""
+    shortest = _spline_frames(fps)
+    gaps, copies = np.zeros_like(missing), np.zeros_like(probe)
+    gone = np.zeros(missing.shape[1], bool)
+    for p, a, b in gap_runs(missing):
+        gaps[a, p] = b - a + 1 <= shortest or _body_gone(missing, a, b)
+        gone[p] |= b - a + 1 > shortest and gaps[a, p]
+    for p, a, b in gap_runs(probe):
+        copies[a, p] = b - a + 1 <= shortest or gone[p]
+    return gaps, copies
 
 
 def _body_gone(missing, a, b):
@@ -1060,7 +1105,7 @@ def _with_holes_splined(motion, out, report):
     if not inside.any():
         return out, []
     known = np.where(missing[..., None], out, motion.positions)
-    out = np.where(inside[..., None], baselines.fill_spline(known), out)
+    out = np.where(inside[..., None], _smooth_of(motion)(known, inside), out)
     alone = [(p, a) for p, a, b in gap_runs(missing) if inside[a:b + 1, p].all()]
     runs = gap_runs(inside)
     report(f"auto: {len(runs)} hole{'s' if len(runs) > 1 else ''} no other estimate reached "

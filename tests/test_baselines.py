@@ -291,6 +291,31 @@ def test_spline_carried_by_its_partner_follows_the_partners_jolts_and_a_curved_o
     assert np.isnan(out[300:330, 1:]).all() and np.isnan(out[140:220, 2]).all()
 
 
+def test_learned_track_is_exact_for_a_steady_swing_and_keeps_the_spline_elsewhere():
+    """Points swinging at one rate, each with its own amplitude, phase and place: every gap's
+    frames are then one linear rule of the frames either side, the same for all of them, which
+    the take's own windows show and a natural spline does not know. Gaps without four seen
+    frames beyond each end (another gap too near, a clip end) keep the spline."""
+    rng = np.random.default_rng(4)
+    frames = 600
+    t = np.arange(frames)[:, None, None]
+    pos = (rng.uniform(0.05, 0.2, (1, 5, 3)) * np.sin(2 * np.pi * t / 47 + rng.uniform(
+        0, 2 * np.pi, (1, 5, 3))) + rng.normal(0, 1, (1, 5, 3)))
+    gappy = pos.copy()
+    gappy[100:130, 0] = gappy[300:312, 1] = gappy[200:220, 2] = np.nan
+    gappy[222:230, 2] = np.nan  # two frames after a gap: neither has four keys beyond
+    gappy[590:, 3] = np.nan  # at the clip end
+    spline = baselines.fill_spline(gappy)
+    out = baselines.fill_learned(gappy)
+    for rows, p in ((slice(100, 130), 0), (slice(300, 312), 1)):
+        np.testing.assert_allclose(out[rows, p], pos[rows, p], atol=1e-6)
+        assert np.abs(spline[rows, p] - pos[rows, p]).max() > 1e-3
+    for rows, p in ((slice(200, 230), 2), (slice(590, None), 3)):
+        np.testing.assert_array_equal(out[rows, p], spline[rows, p])
+    np.testing.assert_array_equal(baselines.fill_learned(gappy, spline=2 * spline)[590:, 3],
+                                  2 * spline[590:, 3])
+
+
 def test_local_spline_is_exact_for_a_body_that_only_walks_and_turns():
     """A still pose carried along a path, turning to and fro: a spline in the body frame is
     exact, a spline in the world is not."""
