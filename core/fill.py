@@ -968,7 +968,7 @@ def _smooth_of(motion):
     ``only``."""
     def smooth(positions, only):
         spline = baselines.fill_spline(positions)
-        if motion.parents is not None or not only.any():
+        if motion.parents is not None or not AUTO_LEARNED or not only.any():
             return spline
         return spline + AUTO_LEARNED * (baselines.fill_learned(positions, spline, only) - spline)
 

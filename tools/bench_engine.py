@@ -10,6 +10,10 @@
    per 60 frames) against the other CMU C3D takes, with the default marker settings (session 12: the
    rigid estimate reaching past the gap ends, partners alone within 20 mm) and session 7's (from
    the ends only, within 5 mm), in the same process.
+4. Smooth track: ``auto`` on the same frames with bursts of 30 frames (50-100 % of the markers
+   gone at once, once per 120 frames) and with dropouts of 6 frames (5 % of the samples), its
+   smooth track the spline alone (``AUTO_LEARNED`` = 0, before session 65) and half of the way
+   on to the take's own interpolator (the default), in the same process.
 
 Usage: OMP_NUM_THREADS=2 .venv/bin/python tools/bench_engine.py [--repeat 3] [--json OUT]
 [--device auto|numpy|cpu|cuda] [--skip-search]
@@ -121,6 +125,35 @@ def stage_markers(repeat):
     return result
 
 
+def stage_smooth(repeat):
+    import numpy as np
+
+    from mocap_gapfill.core import fill as fills
+    from mocap_gapfill.core.evaluate import punch_gaps, rmse_mm, with_gaps
+    from mocap_gapfill.core.io import read_motion
+    from mocap_gapfill.core.kb import build_kb
+
+    kb = build_kb([DATA / "cmu/c3d"], fps=120.0, exclude=["*135_02*"])
+    take = read_motion(DATA / "cmu/c3d/135_02.c3d").frame_range(0, 2048)
+    take = take.select([n for n in take.names if n in kb.names])
+    result = {"frames": 2048, "points": take.n_points, "kb_size": kb.size}
+    learned = fills.AUTO_LEARNED
+    for protocol, length in (("bursts", 30), ("shortgaps", 6)):
+        miss = punch_gaps(2048, take.n_points, protocol, length, np.random.default_rng(0))
+        query = with_gaps(take, miss)
+        for label, share in (("spline", 0.0), ("learned", learned)) * repeat:
+            fills.AUTO_LEARNED = share
+            t = time.perf_counter()
+            out = fills.fill(query, "auto", kb=kb)
+            result.setdefault(f"{protocol}_{label}_s", []).append(time.perf_counter() - t)
+            result[f"{protocol}_{label}_rmse_missing_mm"] = rmse_mm(out, take, miss)
+        for label in ("spline", "learned"):
+            result[f"{protocol}_{label}_median_s"] = statistics.median(
+                result.pop(f"{protocol}_{label}_s"))
+    fills.AUTO_LEARNED = learned
+    return result
+
+
 def run_stage(name, repeat, device="auto"):
     """Run one stage in a fresh interpreter; its result plus that process's peak RSS."""
     proc = subprocess.run([sys.executable, __file__, "--stage", name, "--repeat", str(repeat),
@@ -134,7 +167,8 @@ def main():
     choose_blas_kernel()  # as the command line does; the stages inherit it
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--stage", choices=["search", "fill", "fill256", "auto", "markers"])
+    parser.add_argument("--stage", choices=["search", "fill", "fill256", "auto", "markers",
+                                                 "smooth"])
     parser.add_argument("--json")
     parser.add_argument("--device", default="auto", help="the fill's (auto, numpy, cpu, cuda)")
     parser.add_argument("--skip-search", action="store_true")
@@ -145,6 +179,7 @@ def main():
                   "fill256": lambda r: stage_fill(r, k=256, device=args.device),
                   "auto": lambda r: stage_fill(r, device=args.device, method="auto"),
                   "markers": stage_markers,
+                  "smooth": stage_smooth,
                   }[args.stage](args.repeat)
         result["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         print(json.dumps(result))
@@ -178,9 +213,18 @@ def main():
         print(f"  {what:34s} median {markers[label + '_median_s']:6.2f} s, RMSE missing "
               f"{markers[label + '_rmse_missing_mm']:.1f} mm")
     print(f"  ratio {markers['reach_median_s'] / markers['ends_median_s']:.2f}")
+    smooth = run_stage("smooth", args.repeat)
+    print(f"smooth track: auto on the same {smooth['frames']} frames")
+    for protocol, what in (("bursts", "bursts of 30 frames"), ("shortgaps", "dropouts of 6 frames")):
+        times = [smooth[f"{protocol}_{label}_median_s"] for label in ("spline", "learned")]
+        errors = [smooth[f"{protocol}_{label}_rmse_missing_mm"] for label in ("spline", "learned")]
+        print(f"  {what:21s} the spline alone {times[0]:6.2f} s ({errors[0]:.1f} mm), half on to "
+              f"the learned one {times[1]:6.2f} s ({errors[1]:.1f} mm), ratio "
+              f"{times[1] / times[0]:.2f}")
     if args.json:
         Path(args.json).write_text(json.dumps({"machine": machine, "search": search,
-                                               "fill": fills, "markers": markers}, indent=1))
+                                               "fill": fills, "markers": markers,
+                                               "smooth": smooth}, indent=1))
 
 
 if __name__ == "__main__":
