@@ -100,11 +100,11 @@ AUTO_OFF_SPLINE = 2.0
 #: docs/METHOD_NOTES.md, session 56: 2, 4, 8 and leaving the fill out gained 0.6-1.2 %, the
 #: losses growing with it)
 AUTO_GONE_DOUBT = 4.0
-#: on a marker set, the smooth track through the take that all of the above weigh (the
-#: spline) goes this share of the way on to the take's own interpolator
-#: (:func:`~.baselines.fill_learned`: the take's windows of each gap's length say how its
-#: markers move on from their keys; chosen on the tuning takes, docs/METHOD_NOTES.md, session
-#: 65: the whole way gained as much on the mean and lost more on some takes)
+#: the smooth track through the take that all of the above weigh (the spline) goes this share
+#: of the way on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's
+#: windows of each gap's length say how its points move on from their keys; chosen on the
+#: tuning takes, docs/METHOD_NOTES.md, session 65: the whole way gained as much on the mean and
+#: lost more on some takes)
 AUTO_LEARNED = 0.5
 #: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
 #: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
@@ -145,8 +145,8 @@ class GapAccount:
     regressed, :func:`~.regression.regress_in_frame`), ``models`` (the knowledge base's local
     models), ``windows``
     (the knowledge base's windows of motion), ``own`` (the take's own regression on the rest of
-    the body), ``spline`` (a spline through the take, short gaps; on a marker set half of the
-    way on to the take's own interpolator, :func:`_smooth_of`), ``pattern`` (a partner's
+    the body), ``spline`` (a spline through the take, short gaps; half of the way on to the
+    take's own interpolator there, :func:`_smooth_of`), ``pattern`` (a partner's
     pattern: short gaps, and a point's long gaps within the knowledge base's side); on a marker
     set the rigid partners' share is their mean over the gap's frames (:func:`_by_steadiness`).
     Where an estimate has no value at some frame (no rigid donors there) the others fill it
@@ -338,10 +338,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     pattern by their errors on copies of each gap (:func:`_with_spline`), those at a clip end
     with the pattern from the one end alone, by errors on one-sided copies
     (:func:`_with_pattern_ends`); holes no estimate reached (dropped frames without a knowledge
-    base) take the spline alone (:func:`_with_holes_splined`). On a marker set that spline goes
-    half of the way on to the take's own interpolator (:func:`~.baselines.fill_learned`: the
-    take's windows of a gap's length say how its markers move on from their keys) over short
-    gaps and where most of the body is gone (:func:`_learnt`). Last, the fill is moved onto
+    base) take the spline alone (:func:`_with_holes_splined`). That spline goes half of the way
+    on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's windows of a
+    gap's length say how its points move on from their keys) over short gaps and where most of
+    the body is gone (:func:`_learnt`). Last, the fill is moved onto
     the distances the take keeps exactly, on a marker set towards those it keeps within a few
     millimetres (:func:`_with_distances_kept`).
     """
@@ -963,12 +963,11 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
 def _smooth_of(motion):
     """The smooth track through the take's gaps that ``auto`` weighs, ``smooth(positions,
     only)`` of positions with NaN gaps: a cubic spline of each point
-    (:func:`~.baselines.fill_spline`), on a marker set :data:`AUTO_LEARNED` of the way on to the
-    take's own interpolator (:func:`~.baselines.fill_learned`) on the gaps that start in
-    ``only``."""
+    (:func:`~.baselines.fill_spline`), :data:`AUTO_LEARNED` of the way on to the take's own
+    interpolator (:func:`~.baselines.fill_learned`) on the gaps that start in ``only``."""
     def smooth(positions, only):
         spline = baselines.fill_spline(positions)
-        if motion.parents is not None or not AUTO_LEARNED or not only.any():
+        if not AUTO_LEARNED or not only.any():
             return spline
         return spline + AUTO_LEARNED * (baselines.fill_learned(positions, spline, only) - spline)
 
