@@ -104,7 +104,7 @@ def fill_learned(pos, spline=None, only=None, keys=LEARNED_KEYS, most=LEARNED_WI
     out = fill_spline(pos) if spline is None else np.array(spline, dtype=np.float64)
     missing = np.isnan(pos[..., 0])
     frames = len(pos)
-    hidden = np.concatenate([np.zeros((1, pos.shape[1]), int), np.cumsum(missing, axis=0)])
+    hidden = _hidden_before(missing)
     weights = {}  # per gap length
     for p, a, b in gap_runs(missing):
         length = b - a + 1
@@ -112,30 +112,85 @@ def fill_learned(pos, spline=None, only=None, keys=LEARNED_KEYS, most=LEARNED_WI
                 a - 1 - keys < 0 or b + 1 + keys >= frames or missing[a - 1 - keys:a, p].any()
                 or missing[b + 1:b + 2 + keys, p].any()):
             continue
-        if length not in weights:
-            before = np.arange(keys, frames - length - 1 - keys)  # the frame before each window
-            seen = hidden[before + length + 2 + keys] == hidden[before - keys]
-            terms, offsets = [], []
-            for q in range(pos.shape[1]):
-                windows = before[seen[:, q]][::2]
-                if len(windows) > most:
-                    windows = windows[np.linspace(0, len(windows) - 1, most).round().astype(int)]
-                terms.append(_learned_terms(pos[:, q], windows, length, keys))
-                offsets.append(_off_line(pos[:, q], windows, length))
-            x = np.concatenate(terms).transpose(0, 2, 1).reshape(-1, 2 * keys + 1)
-            y = np.concatenate(offsets).transpose(0, 2, 1).reshape(-1, length)
-            gram = x.T @ x
-            gram += (1e-12 * np.trace(gram) / len(gram) + 1e-15) * np.eye(len(gram))
-            weights[length] = (np.linalg.solve(gram, x.T @ y) if len(x) >= 3 * LEARNED_LEAST
-                               else None)
+        if length not in weights:  # windows after the frame before them, as a gap is
+            weights[length] = _learned_weights(
+                pos, hidden, keys, length + 1 + keys, most,
+                lambda track, before: _learned_terms(track, before, length, keys),
+                lambda track, before: _off_line(track, before, length))
         if weights[length] is None:
             continue
-        before = np.array([a - 1])
         line = pos[a - 1, p] + np.arange(1, length + 1)[:, None] / (length + 1) * (
             pos[b + 1, p] - pos[a - 1, p])
-        out[a:b + 1, p] = line + weights[length].T @ _learned_terms(pos[:, p], before, length,
-                                                                    keys)[0]
+        out[a:b + 1, p] = line + weights[length].T @ _learned_terms(
+            pos[:, p], np.array([a - 1]), length, keys)[0]
     return out
+
+
+def fill_learned_ends(pos, only=None, keys=LEARNED_KEYS, most=LEARNED_WINDOWS):
+    """Each gap at a clip end (a point seen on one side of it only, with ``keys`` seen frames
+    behind its key) as the take's points move on from a key: on each gap frame, the key plus a
+    sum of the steps from it to the ``keys`` frames behind it, one weight per step and distance
+    from the key, shared by the three axes and by every point, fitted by least squares on the
+    take's own windows (every other one, at most ``most`` a point; a gap at the clip's start is
+    read backwards in time, with the weights of the windows read forwards). Over a few frames
+    a point carries on as it moved into its key, which holding the key does not. Only the gaps
+    that start in ``only`` ((frames, points) bool; default every gap at a clip end); the rest,
+    and gaps without enough windows (:data:`LEARNED_LEAST`), are NaN."""
+    pos = np.asarray(pos, dtype=np.float64)
+    out = np.full(pos.shape, np.nan)
+    missing = np.isnan(pos[..., 0])
+    frames = len(pos)
+    hidden = _hidden_before(missing)
+    weights = {}  # per gap length
+    for p, a, b in gap_runs(missing):
+        length = b - a + 1
+        if (a == 0) == (b == frames - 1) or (only is not None and not only[a, p]):
+            continue
+        track, key = (pos[:, p], a - 1) if a > 0 else (pos[::-1, p], frames - 2 - b)
+        if key - keys < 0 or np.isnan(track[key - keys:key + 1, 0]).any():
+            continue
+        if length not in weights:  # windows after their key
+            weights[length] = _learned_weights(
+                pos, hidden, keys, length, most,
+                lambda track, key: _steps_back(track, key, keys),
+                lambda track, key: track[key[:, None] + 1 + np.arange(length)]
+                - track[key][:, None])
+        if weights[length] is None:
+            continue
+        moved = track[key] + weights[length].T @ _steps_back(track, np.array([key]), keys)[0]
+        out[a:b + 1, p] = moved if a > 0 else moved[::-1]
+    return out
+
+
+def _hidden_before(missing):
+    """(frames + 1, points): how many of each point's samples are missing before each frame."""
+    return np.concatenate([np.zeros((1, missing.shape[1]), int), np.cumsum(missing, axis=0)])
+
+
+def _learned_weights(pos, hidden, back, on, most, terms, targets):
+    """The least-squares weights (terms, targets) of ``targets(track, anchors)`` ((windows,
+    targets, 3)) on ``terms(track, anchors)`` ((windows, terms, 3)), one per term and target
+    shared by the three axes, over every point's windows: the anchor frames whose ``back``
+    frames before and ``on`` after are all seen (``hidden``: :func:`_hidden_before`), every other
+    one, at most ``most`` a point, spread over the take. None with fewer than
+    :data:`LEARNED_LEAST` windows in all."""
+    anchors = np.arange(back, len(pos) - on)
+    seen = hidden[anchors + on + 1] == hidden[anchors - back]
+    x, y = [], []
+    for q in range(pos.shape[1]):
+        windows = anchors[seen[:, q]][::2]
+        if len(windows) > most:
+            windows = windows[np.linspace(0, len(windows) - 1, most).round().astype(int)]
+        x.append(terms(pos[:, q], windows))
+        y.append(targets(pos[:, q], windows))
+    x, y = np.concatenate(x), np.concatenate(y)
+    if len(x) < LEARNED_LEAST:
+        return None
+    x = x.transpose(0, 2, 1).reshape(-1, x.shape[1])
+    y = y.transpose(0, 2, 1).reshape(-1, y.shape[1])
+    gram = x.T @ x
+    gram += (1e-12 * np.trace(gram) / len(gram) + 1e-15) * np.eye(len(gram))
+    return np.linalg.solve(gram, x.T @ y)
 
 
 def _learned_terms(track, before, length, keys):
@@ -146,6 +201,12 @@ def _learned_terms(track, before, length, keys):
     steps = ([last - first] + [track[before - j] - first for j in range(1, keys + 1)]
              + [track[before + length + 1 + j] - last for j in range(1, keys + 1)])
     return np.stack(steps, axis=1)
+
+
+def _steps_back(track, key, keys):
+    """(windows, keys, 3): the steps from the frames ``key`` of one point's ``track`` to the
+    ``keys`` frames before each."""
+    return np.stack([track[key - j] - track[key] for j in range(1, keys + 1)], axis=1)
 
 
 def _off_line(track, before, length):

@@ -106,6 +106,14 @@ AUTO_GONE_DOUBT = 4.0
 #: tuning takes, docs/METHOD_NOTES.md, session 65: the whole way gained as much on the mean and
 #: lost more on some takes)
 AUTO_LEARNED = 0.5
+#: beside the partner's pattern, a marker's short gap at a clip end joins the take's own
+#: interpolator from its one key (:func:`~.baselines.fill_learned_ends`) by its inverse error
+#: on one-sided copies times this weight (chosen on the tuning takes, docs/METHOD_NOTES.md,
+#: session 65: at weight 1 more gain, a larger worst case; a skeleton's joints lost by it)
+AUTO_LEARNED_ENDS_WEIGHT = 0.5
+#: and only on gaps of up to this many seconds (on the tuning takes it gained on every take at
+#: 0.025 and 0.05 s, and lost on some at 0.1 s)
+AUTO_LEARNED_ENDS_SECONDS = 0.05
 #: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
 #: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
 #: went astray on the tuning takes, where the partner's pattern carries them: docs/METHOD_NOTES.md,
@@ -1021,16 +1029,19 @@ def _off_the_spline(estimate, spline, missing, p, a, b, e_estimate, e_spline):
 def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
     """``out`` with each gap of up to :data:`AUTO_SPLINE_SECONDS` at a clip end (no observation
     on one side: no spline across it) blended with its pattern fill from the one end
-    (:func:`~.baselines.fill_pattern`, at :data:`AUTO_PATTERN_WEIGHT`) by inverse errors per
-    sample: the pattern's on up to :data:`AUTO_SPLINE_COPIES` one-sided copies of the gap (the
+    (:func:`~.baselines.fill_pattern`, at :data:`AUTO_PATTERN_WEIGHT`) and, on a marker set, the
+    take's own interpolator from its one key (:func:`~.baselines.fill_learned_ends`, at
+    :data:`AUTO_LEARNED_ENDS_WEIGHT`) by inverse errors per sample: theirs on up to
+    :data:`AUTO_SPLINE_COPIES` one-sided copies of the gap (the
     point hidden from the copy to the same clip end, so each copy has the one end its gap has,
     at the nearest frames where it is observed), ``out``'s on the point's copies (``e_out``) or,
     where ``rigid_alone`` says the rigid estimate fills the point alone, that estimate's
     (``rigid_of(hidden)``) on the same one-sided copies. Over a few frames a partner's trajectory
     with the offset at the one end carries a marker closely; the rigid estimate from one end
     turns with three donors' noise. Returns the blend and, per gap blended (``(point, first
-    frame)``), the spline's share (0), the pattern's and the blend's expected squared error."""
-    from .baselines import fill_pattern
+    frame)``), the smooth track's share (the learned one's), the pattern's and the blend's
+    expected squared error."""
+    from .baselines import fill_learned_ends, fill_pattern
 
     missing = motion.missing
     frames = len(missing)
@@ -1065,6 +1076,15 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
 
     pattern_error = _round_errors(rounds, motion.positions, lambda hidden: fill_pattern(
         np.where(hidden[..., None], np.nan, motion.positions), only=hidden, cache=donors))
+    learned, learned_error = np.full(out.shape, np.nan), None
+    carried = np.zeros_like(ends)  # the gaps short enough for it, at their first frames
+    for p, a, b, _ in copies:
+        carried[a, p] = b - a + 1 <= AUTO_LEARNED_ENDS_SECONDS * motion.fps
+    # (a skeleton's joints lost by it: docs/METHOD_NOTES.md, session 65)
+    if motion.parents is None and carried.any():
+        learned = fill_learned_ends(motion.positions, only=carried)
+        learned_error = _round_errors(rounds, motion.positions, lambda hidden: fill_learned_ends(
+            np.where(hidden[..., None], np.nan, motion.positions), only=hidden))
     rigid_error = (_round_errors(rounds, motion.positions, rigid_of)
                    if rigid_alone[[p for p, _, _, _ in copies]].any() else None)
     out, shares = out.copy(), {}
@@ -1073,18 +1093,25 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
             return np.mean([error[k][lo:lo + b - a + 1, p].mean() for k, lo in starts])
 
         e_here, e_pattern = e_out[p], on_copies(pattern_error)
+        e_learned = np.inf if learned_error is None else on_copies(learned_error)
         if rigid_alone[p]:
             e_rigid = on_copies(rigid_error)
             e_here = e_rigid if np.isfinite(e_rigid) else e_here
         if not (np.isfinite(e_pattern) and np.isfinite(pattern[a:b + 1, p]).all()):
-            continue  # no donor spans the gap or one of its copies
-        w, squared = _weigh_in(out, p, a, b, (pattern,), (e_here, e_pattern),
-                               (1.0, AUTO_PATTERN_WEIGHT))
-        shares[p, a] = 0.0, w[1], squared
+            e_pattern = np.inf  # no donor spans the gap or one of its copies
+        if not (np.isfinite(e_learned) and np.isfinite(learned[a:b + 1, p]).all()):
+            e_learned = np.inf  # too few frames behind the key, or windows
+        if np.isinf(e_pattern) and np.isinf(e_learned):
+            continue
+        w, squared = _weigh_in(out, p, a, b, (learned, pattern), (e_here, e_learned, e_pattern),
+                               (1.0, AUTO_LEARNED_ENDS_WEIGHT, AUTO_PATTERN_WEIGHT))
+        shares[p, a] = w[1], w[2], squared
+    learnt = sum(learned_share >= 0.25 for learned_share, _, _ in shares.values())
     patterned = sum(pattern_share >= 0.25 for _, pattern_share, _ in shares.values())
-    if patterned:
-        report(f"auto: of {len(shares)} short gaps at the take's ends a partner's pattern "
-               f"carries a quarter or more of {patterned}")
+    if learnt or patterned:
+        report(f"auto: of {len(shares)} short gaps at the take's ends the take's own "
+               f"interpolator from the one key carries a quarter or more of {learnt}, a "
+               f"partner's pattern of {patterned}")
     return out, shares
 
 

@@ -316,6 +316,33 @@ def test_learned_track_is_exact_for_a_steady_swing_and_keeps_the_spline_elsewher
                                   2 * spline[590:, 3])
 
 
+def test_learned_track_from_one_key_is_exact_for_a_steady_swing_at_both_clip_ends():
+    """The same swing, gone at the clip's start and at its end: each frame of such a gap is one
+    linear rule of the frames behind its one key, which the take's windows show (the start read
+    backwards in time); holding the key is far off. Gaps inside the take, gaps outside
+    ``only`` and gaps without four seen frames behind the key are NaN."""
+    rng = np.random.default_rng(5)
+    frames = 600
+    t = np.arange(frames)[:, None, None]
+    pos = (rng.uniform(0.05, 0.2, (1, 5, 3)) * np.sin(2 * np.pi * t / 47 + rng.uniform(
+        0, 2 * np.pi, (1, 5, 3))) + rng.normal(0, 1, (1, 5, 3)))
+    gappy = pos.copy()
+    gappy[:10, 0] = gappy[588:, 1] = gappy[300:310, 2] = np.nan
+    gappy[:6, 3] = gappy[8:12, 3] = np.nan  # two frames seen behind the key: too few
+    gappy[590:, 4] = np.nan
+    only = np.zeros(gappy.shape[:2], bool)
+    only[588, 1] = True
+    out = baselines.fill_learned_ends(gappy)
+    for rows, p in ((slice(None, 10), 0), (slice(588, None), 1)):
+        np.testing.assert_allclose(out[rows, p], pos[rows, p], atol=1e-6)
+        held = pos[rows.start - 1 if rows.start else rows.stop, p]
+        assert np.abs(held - pos[rows, p]).max() > 0.01
+    assert np.isnan(out[300:310, 2]).all() and np.isnan(out[:12, 3]).all()
+    part = baselines.fill_learned_ends(gappy, only=only)
+    assert np.isnan(part[:10, 0]).all()
+    np.testing.assert_array_equal(part[588:, 1], out[588:, 1])
+
+
 def test_local_spline_is_exact_for_a_body_that_only_walks_and_turns():
     """A still pose carried along a path, turning to and fro: a spline in the body frame is
     exact, a spline in the world is not."""
