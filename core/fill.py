@@ -154,7 +154,8 @@ class GapAccount:
     models), ``windows``
     (the knowledge base's windows of motion), ``own`` (the take's own regression on the rest of
     the body), ``spline`` (a spline through the take, short gaps; half of the way on to the
-    take's own interpolator there, :func:`_smooth_of`), ``pattern`` (a partner's
+    take's own interpolator there, :func:`_smooth_of`, and at a marker's clip end that
+    interpolator from the one key, :func:`~.baselines.fill_learned_ends`), ``pattern`` (a partner's
     pattern: short gaps, and a point's long gaps within the knowledge base's side); on a marker
     set the rigid partners' share is their mean over the gap's frames (:func:`_by_steadiness`).
     Where an estimate has no value at some frame (no rigid donors there) the others fill it
