@@ -100,11 +100,9 @@ def fill_learned(pos, spline=None, only=None, keys=LEARNED_KEYS, most=LEARNED_WI
     that start in ``only`` ((frames, points) bool; default every gap); the others, and every gap
     where fewer than :data:`LEARNED_LEAST` windows fit, take ``spline`` (default
     :func:`fill_spline` of ``pos``)."""
-    pos = np.asarray(pos, dtype=np.float64)
+    pos, missing, hidden = _seen_so_far(pos)
     out = fill_spline(pos) if spline is None else np.array(spline, dtype=np.float64)
-    missing = np.isnan(pos[..., 0])
     frames = len(pos)
-    hidden = _hidden_before(missing)
     weights = {}  # per gap length
     for p, a, b in gap_runs(missing):
         length = b - a + 1
@@ -136,11 +134,9 @@ def fill_learned_ends(pos, only=None, keys=LEARNED_KEYS, most=LEARNED_WINDOWS):
     a point carries on as it moved into its key, which holding the key does not. Only the gaps
     that start in ``only`` ((frames, points) bool; default every gap at a clip end); the rest,
     and gaps without enough windows (:data:`LEARNED_LEAST`), are NaN."""
-    pos = np.asarray(pos, dtype=np.float64)
+    pos, missing, hidden = _seen_so_far(pos)
     out = np.full(pos.shape, np.nan)
-    missing = np.isnan(pos[..., 0])
     frames = len(pos)
-    hidden = _hidden_before(missing)
     weights = {}  # per gap length
     for p, a, b in gap_runs(missing):
         length = b - a + 1
@@ -162,16 +158,21 @@ def fill_learned_ends(pos, only=None, keys=LEARNED_KEYS, most=LEARNED_WINDOWS):
     return out
 
 
-def _hidden_before(missing):
-    """(frames + 1, points): how many of each point's samples are missing before each frame."""
-    return np.concatenate([np.zeros((1, missing.shape[1]), int), np.cumsum(missing, axis=0)])
+def _seen_so_far(pos):
+    """``pos`` as floats, its missing samples (frames, points) and how many of each point's
+    samples are missing before each frame ((frames + 1, points): a window is seen throughout
+    where the counts at its two ends agree)."""
+    pos = np.asarray(pos, dtype=np.float64)
+    missing = np.isnan(pos[..., 0])
+    return pos, missing, np.concatenate([np.zeros((1, missing.shape[1]), int),
+                                         np.cumsum(missing, axis=0)])
 
 
 def _learned_weights(pos, hidden, back, on, most, terms, targets):
     """The least-squares weights (terms, targets) of ``targets(track, anchors)`` ((windows,
     targets, 3)) on ``terms(track, anchors)`` ((windows, terms, 3)), one per term and target
     shared by the three axes, over every point's windows: the anchor frames whose ``back``
-    frames before and ``on`` after are all seen (``hidden``: :func:`_hidden_before`), every other
+    frames before and ``on`` after are all seen (``hidden``: :func:`_seen_so_far`), every other
     one, at most ``most`` a point, spread over the take. None with fewer than
     :data:`LEARNED_LEAST` windows in all."""
     anchors = np.arange(back, len(pos) - on)

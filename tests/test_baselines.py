@@ -291,16 +291,21 @@ def test_spline_carried_by_its_partner_follows_the_partners_jolts_and_a_curved_o
     assert np.isnan(out[300:330, 1:]).all() and np.isnan(out[140:220, 2]).all()
 
 
+def _steady_swing(seed, frames=600):
+    """Five points swinging at one rate (a period of 47 frames), each with its own amplitude,
+    phase and place."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(frames)[:, None, None]
+    return (rng.uniform(0.05, 0.2, (1, 5, 3)) * np.sin(2 * np.pi * t / 47 + rng.uniform(
+        0, 2 * np.pi, (1, 5, 3))) + rng.normal(0, 1, (1, 5, 3)))
+
+
 def test_learned_track_is_exact_for_a_steady_swing_and_keeps_the_spline_elsewhere():
     """Points swinging at one rate, each with its own amplitude, phase and place: every gap's
     frames are then one linear rule of the frames either side, the same for all of them, which
     the take's own windows show and a natural spline does not know. Gaps without four seen
     frames beyond each end (another gap too near, a clip end) keep the spline."""
-    rng = np.random.default_rng(4)
-    frames = 600
-    t = np.arange(frames)[:, None, None]
-    pos = (rng.uniform(0.05, 0.2, (1, 5, 3)) * np.sin(2 * np.pi * t / 47 + rng.uniform(
-        0, 2 * np.pi, (1, 5, 3))) + rng.normal(0, 1, (1, 5, 3)))
+    pos = _steady_swing(4)
     gappy = pos.copy()
     gappy[100:130, 0] = gappy[300:312, 1] = gappy[200:220, 2] = np.nan
     gappy[222:230, 2] = np.nan  # two frames after a gap: neither has four keys beyond
@@ -321,11 +326,7 @@ def test_learned_track_from_one_key_is_exact_for_a_steady_swing_at_both_clip_end
     linear rule of the frames behind its one key, which the take's windows show (the start read
     backwards in time); holding the key is far off. Gaps inside the take, gaps outside
     ``only`` and gaps without four seen frames behind the key are NaN."""
-    rng = np.random.default_rng(5)
-    frames = 600
-    t = np.arange(frames)[:, None, None]
-    pos = (rng.uniform(0.05, 0.2, (1, 5, 3)) * np.sin(2 * np.pi * t / 47 + rng.uniform(
-        0, 2 * np.pi, (1, 5, 3))) + rng.normal(0, 1, (1, 5, 3)))
+    pos = _steady_swing(5)
     gappy = pos.copy()
     gappy[:10, 0] = gappy[588:, 1] = gappy[300:310, 2] = np.nan
     gappy[:6, 3] = gappy[8:12, 3] = np.nan  # two frames seen behind the key: too few
