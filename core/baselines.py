@@ -58,10 +58,13 @@ CARRIED_PAD = 3
 #: in one batch
 NEAREST_CHUNK = 1 << 20
 #: :func:`fill_learned`: frames beyond each gap end it reads, windows a point it fits on at
-#: most, and the fewest windows of a gap's length it fits on (docs/METHOD_NOTES.md, session 65)
+#: most, and the fewest windows of a gap's length it fits on (docs/METHOD_NOTES.md, session 65);
+#: at most this many window frames over all points in one fit (fewer windows a point for long
+#: gaps of many points: memory)
 LEARNED_KEYS = 4
 LEARNED_WINDOWS = 400
 LEARNED_LEAST = 20
+LEARNED_FRAMES = 2_000_000
 
 
 def fill_linear(pos):
@@ -88,7 +91,8 @@ def fill_spline(pos):
     return out
 
 
-def fill_learned(pos, spline=None, only=None, keys=LEARNED_KEYS, most=LEARNED_WINDOWS):
+def fill_learned(pos, spline=None, only=None, longest=None, keys=LEARNED_KEYS,
+                 most=LEARNED_WINDOWS):
     """Each gap (both ends in the take, with ``keys`` seen frames beyond each end) as the take's
     points move on from their keys: on each gap frame, the straight line between the frames
     either side plus an offset linear in the step between them and in the steps from each to
@@ -97,16 +101,17 @@ def fill_learned(pos, spline=None, only=None, keys=LEARNED_KEYS, most=LEARNED_WI
     seen throughout (every other one, at most ``most`` a point, spread over the take). A natural
     spline is one such linear rule fixed in advance; this one takes what the take's motion
     favours (a jittering marker smooths its keys, a swinging hand carries them on). Only the gaps
-    that start in ``only`` ((frames, points) bool; default every gap); the others, and every gap
-    where fewer than :data:`LEARNED_LEAST` windows fit, take ``spline`` (default
-    :func:`fill_spline` of ``pos``)."""
+    that start in ``only`` ((frames, points) bool; default every gap) and last at most
+    ``longest`` frames (default any); the others, and every gap where fewer than
+    :data:`LEARNED_LEAST` windows fit, take ``spline`` (default :func:`fill_spline` of
+    ``pos``)."""
     pos, missing, hidden = _seen_so_far(pos)
     out = fill_spline(pos) if spline is None else np.array(spline, dtype=np.float64)
     frames = len(pos)
     weights = {}  # per gap length
     for p, a, b in gap_runs(missing):
         length = b - a + 1
-        if (only is not None and not only[a, p]) or (
+        if (only is not None and not only[a, p]) or (longest is not None and length > longest) or (
                 a - 1 - keys < 0 or b + 1 + keys >= frames or missing[a - 1 - keys:a, p].any()
                 or missing[b + 1:b + 2 + keys, p].any()):
             continue
@@ -173,10 +178,12 @@ def _learned_weights(pos, hidden, back, on, most, terms, targets):
     targets, 3)) on ``terms(track, anchors)`` ((windows, terms, 3)), one per term and target
     shared by the three axes, over every point's windows: the anchor frames whose ``back``
     frames before and ``on`` after are all seen (``hidden``: :func:`_seen_so_far`), every other
-    one, at most ``most`` a point, spread over the take. None with fewer than
+    one, at most ``most`` a point (fewer where :data:`LEARNED_FRAMES` says), spread over the
+    take. None with fewer than
     :data:`LEARNED_LEAST` windows in all."""
     anchors = np.arange(back, len(pos) - on)
     seen = hidden[anchors + on + 1] == hidden[anchors - back]
+    most = min(most, max(1, LEARNED_FRAMES // (pos.shape[1] * (back + on + 1))))
     x, y = [], []
     for q in range(pos.shape[1]):
         windows = anchors[seen[:, q]][::2]

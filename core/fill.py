@@ -106,6 +106,8 @@ AUTO_GONE_DOUBT = 4.0
 #: tuning takes, docs/METHOD_NOTES.md, session 65: the whole way gained as much on the mean and
 #: lost more on some takes)
 AUTO_LEARNED = 0.5
+#: ... on gaps of up to this many seconds (the longest the tuning takes' bursts had)
+AUTO_LEARNED_SECONDS = 0.5
 #: beside the partner's pattern, a marker's short gap at a clip end joins the take's own
 #: interpolator from its one key (:func:`~.baselines.fill_learned_ends`) by its inverse error
 #: on one-sided copies times this weight (chosen on the tuning takes, docs/METHOD_NOTES.md,
@@ -973,12 +975,15 @@ def _smooth_of(motion):
     """The smooth track through the take's gaps that ``auto`` weighs, ``smooth(positions,
     only)`` of positions with NaN gaps: a cubic spline of each point
     (:func:`~.baselines.fill_spline`), :data:`AUTO_LEARNED` of the way on to the take's own
-    interpolator (:func:`~.baselines.fill_learned`) on the gaps that start in ``only``."""
+    interpolator (:func:`~.baselines.fill_learned`) on the gaps that start in ``only`` and last
+    at most :data:`AUTO_LEARNED_SECONDS`."""
     def smooth(positions, only):
         spline = baselines.fill_spline(positions)
         if not AUTO_LEARNED or not only.any():
             return spline
-        return spline + AUTO_LEARNED * (baselines.fill_learned(positions, spline, only) - spline)
+        learned = baselines.fill_learned(positions, spline, only,
+                                         longest=AUTO_LEARNED_SECONDS * motion.fps)
+        return spline + AUTO_LEARNED * (learned - spline)
 
     return smooth
 
@@ -1118,8 +1123,8 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
 
 def _with_holes_splined(motion, out, report):
     """``out`` with the holes no estimate reached filled by a cubic spline through the point's
-    values (seen and filled): runs of a point's missing frames where ``out`` has no value, with
-    a value on both sides. There no knowledge base models the point (none given, or it lacks
+    values (seen and filled; :func:`_smooth_of`): runs of a point's missing frames where ``out``
+    has no value, with a value on both sides. There no knowledge base models the point (none given, or it lacks
     the point) and fewer than three of its rigid partners are seen: frames where every marker
     is gone at once (a dropped camera frame, the subject out of the volume), whose neighbours
     show where each one was. Runs at a clip's end stay open (nothing on the far side). Returns

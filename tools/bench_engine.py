@@ -215,7 +215,8 @@ def main():
     print(f"  ratio {markers['reach_median_s'] / markers['ends_median_s']:.2f}")
     smooth = run_stage("smooth", args.repeat)
     print(f"smooth track: auto on the same {smooth['frames']} frames")
-    for protocol, what in (("bursts", "bursts of 30 frames"), ("shortgaps", "dropouts of 6 frames")):
+    for protocol, what in (("bursts", "bursts of 30 frames"),
+                           ("shortgaps", "dropouts of 6 frames")):
         times = [smooth[f"{protocol}_{label}_median_s"] for label in ("spline", "learned")]
         errors = [smooth[f"{protocol}_{label}_rmse_missing_mm"] for label in ("spline", "learned")]
         print(f"  {what:21s} the spline alone {times[0]:6.2f} s ({errors[0]:.1f} mm), half on to "
