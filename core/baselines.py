@@ -108,24 +108,27 @@ def fill_learned(pos, spline=None, only=None, longest=None, keys=LEARNED_KEYS,
     pos, missing, hidden = _seen_so_far(pos)
     out = fill_spline(pos) if spline is None else np.array(spline, dtype=np.float64)
     frames = len(pos)
-    weights = {}  # per gap length
+    gaps = {}  # (length, point) -> the frames before its gaps of that length
     for p, a, b in gap_runs(missing):
         length = b - a + 1
-        if (only is not None and not only[a, p]) or (longest is not None and length > longest) or (
-                a - 1 - keys < 0 or b + 1 + keys >= frames or missing[a - 1 - keys:a, p].any()
-                or missing[b + 1:b + 2 + keys, p].any()):
-            continue
+        if not ((only is not None and not only[a, p]) or (longest is not None and length > longest)
+                or a - 1 - keys < 0 or b + 1 + keys >= frames
+                or missing[a - 1 - keys:a, p].any() or missing[b + 1:b + 2 + keys, p].any()):
+            gaps.setdefault((length, p), []).append(a - 1)
+    weights = {}  # per gap length
+    for (length, p), before in gaps.items():
         if length not in weights:  # windows after the frame before them, as a gap is
             weights[length] = _learned_weights(
                 pos, hidden, keys, length + 1 + keys, most,
                 lambda track, before: _learned_terms(track, before, length, keys),
-                lambda track, before: _off_line(track, before, length))
-        if weights[length] is None:
-            continue
-        line = pos[a - 1, p] + np.arange(1, length + 1)[:, None] / (length + 1) * (
-            pos[b + 1, p] - pos[a - 1, p])
-        out[a:b + 1, p] = line + weights[length].T @ _learned_terms(
-            pos[:, p], np.array([a - 1]), length, keys)[0]
+                lambda track, before: track[before[:, None] + 1 + np.arange(length)]
+                - _line(track, before, length))
+        if weights[length] is not None:
+            before = np.array(before)
+            out[before[:, None] + 1 + np.arange(length), p] = (
+                _line(pos[:, p], before, length) + np.einsum(
+                    "kl,wkc->wlc", weights[length],
+                    _learned_terms(pos[:, p], before, length, keys)))
     return out
 
 
@@ -217,13 +220,12 @@ def _steps_back(track, key, keys):
     return np.stack([track[key - j] - track[key] for j in range(1, keys + 1)], axis=1)
 
 
-def _off_line(track, before, length):
-    """(windows, length, 3): the track over those windows less the straight line between the
-    frames either side."""
+def _line(track, before, length):
+    """(windows, length, 3): the straight line over windows of ``length`` frames after the frames
+    ``before`` of one point's ``track``, between the frames either side."""
     first, last = track[before], track[before + length + 1]
-    along = np.arange(1, length + 1)[None, :, None] / (length + 1)
-    return (track[before[:, None] + 1 + np.arange(length)]
-            - (first[:, None] + along * (last - first)[:, None]))
+    return first[:, None] + np.arange(1, length + 1)[None, :, None] / (length + 1) * (
+        last - first)[:, None]
 
 
 def fill_svt(pos, rank_fraction=0.02, iterations=200, tol=1e-5):
