@@ -1082,7 +1082,7 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
 
     pattern_error = _round_errors(rounds, motion.positions, lambda hidden: fill_pattern(
         np.where(hidden[..., None], np.nan, motion.positions), only=hidden, cache=donors))
-    learned, learned_error = np.full(out.shape, np.nan), None
+    learned = learned_error = None
     carried = np.zeros_like(ends)  # the gaps short enough for it, at their first frames
     for p, a, b, _ in copies:
         carried[a, p] = b - a + 1 <= AUTO_LEARNED_ENDS_SECONDS * motion.fps
@@ -1099,14 +1099,14 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
             return np.mean([error[k][lo:lo + b - a + 1, p].mean() for k, lo in starts])
 
         e_here, e_pattern = e_out[p], on_copies(pattern_error)
-        e_learned = np.inf if learned_error is None else on_copies(learned_error)
         if rigid_alone[p]:
             e_rigid = on_copies(rigid_error)
             e_here = e_rigid if np.isfinite(e_rigid) else e_here
         if not (np.isfinite(e_pattern) and np.isfinite(pattern[a:b + 1, p]).all()):
             e_pattern = np.inf  # no donor spans the gap or one of its copies
+        e_learned = np.inf if learned is None else on_copies(learned_error)
         if not (np.isfinite(e_learned) and np.isfinite(learned[a:b + 1, p]).all()):
-            e_learned = np.inf  # too few frames behind the key, or windows
+            e_learned = np.inf  # none on a skeleton, too few frames behind the key, or windows
         if np.isinf(e_pattern) and np.isinf(e_learned):
             continue
         w, squared = _weigh_in(out, p, a, b, (learned, pattern), (e_here, e_learned, e_pattern),

@@ -98,30 +98,50 @@ def stage_fill(repeat, k=None, device="auto", method="knn"):
             "rmse_missing_mm": rmse_mm(out, take, miss)}
 
 
-def stage_markers(repeat):
-    import numpy as np
-
-    from mocap_gapfill.core import fill as fills
-    from mocap_gapfill.core.evaluate import punch_gaps, rmse_mm, with_gaps
+def _marker_case():
+    """The marker stages' knowledge base (the CMU C3D takes but 135_02), take (135_02's first
+    2,048 frames, the markers the knowledge base has) and the facts their results start with."""
     from mocap_gapfill.core.io import read_motion
     from mocap_gapfill.core.kb import build_kb
 
     kb = build_kb([DATA / "cmu/c3d"], fps=120.0, exclude=["*135_02*"])
     take = read_motion(DATA / "cmu/c3d/135_02.c3d").frame_range(0, 2048)
     take = take.select([n for n in take.names if n in kb.names])
+    return kb, take, {"frames": 2048, "points": take.n_points, "kb_size": kb.size}
+
+
+def _timed_auto(result, label, take, miss, kb):
+    """``auto`` on ``take`` with ``miss`` gone: its seconds appended to ``result[label_s]``, its
+    RMSE over the gaps in ``result[label_rmse_missing_mm]``."""
+    from mocap_gapfill.core.evaluate import rmse_mm, with_gaps
+    from mocap_gapfill.core.fill import fill
+
+    t = time.perf_counter()
+    out = fill(with_gaps(take, miss), "auto", kb=kb)
+    result.setdefault(f"{label}_s", []).append(time.perf_counter() - t)
+    result[f"{label}_rmse_missing_mm"] = rmse_mm(out, take, miss)
+
+
+def _medians(result, labels):
+    """Each ``label_s`` list of ``result`` as its median, ``label_median_s``."""
+    for label in labels:
+        result[f"{label}_median_s"] = statistics.median(result.pop(f"{label}_s"))
+
+
+def stage_markers(repeat):
+    import numpy as np
+
+    from mocap_gapfill.core import fill as fills
+    from mocap_gapfill.core.evaluate import punch_gaps
+
+    kb, take, result = _marker_case()
     miss = punch_gaps(2048, take.n_points, "markers", 0.3, np.random.default_rng(0))
-    query = with_gaps(take, miss)
-    result = {"frames": 2048, "points": take.n_points, "kb_size": kb.size}
     now = fills.AUTO_REACH, fills.AUTO_RIGID_FIRST_MARKERS
     then = None, fills.AUTO_RIGID_FIRST  # session 7: from the gap ends, partners alone within 5 mm
     for label, (reach, alone) in (("ends", then), ("reach", now)) * repeat:
         fills.AUTO_REACH, fills.AUTO_RIGID_FIRST_MARKERS = reach, alone
-        t = time.perf_counter()
-        out = fills.fill(query, "auto", kb=kb)
-        result.setdefault(f"{label}_s", []).append(time.perf_counter() - t)
-        result[f"{label}_rmse_missing_mm"] = rmse_mm(out, take, miss)
-    for label in ("ends", "reach"):
-        result[f"{label}_median_s"] = statistics.median(result.pop(f"{label}_s"))
+        _timed_auto(result, label, take, miss, kb)
+    _medians(result, ("ends", "reach"))
     return result
 
 
@@ -129,27 +149,16 @@ def stage_smooth(repeat):
     import numpy as np
 
     from mocap_gapfill.core import fill as fills
-    from mocap_gapfill.core.evaluate import punch_gaps, rmse_mm, with_gaps
-    from mocap_gapfill.core.io import read_motion
-    from mocap_gapfill.core.kb import build_kb
+    from mocap_gapfill.core.evaluate import punch_gaps
 
-    kb = build_kb([DATA / "cmu/c3d"], fps=120.0, exclude=["*135_02*"])
-    take = read_motion(DATA / "cmu/c3d/135_02.c3d").frame_range(0, 2048)
-    take = take.select([n for n in take.names if n in kb.names])
-    result = {"frames": 2048, "points": take.n_points, "kb_size": kb.size}
+    kb, take, result = _marker_case()
     learned = fills.AUTO_LEARNED
     for protocol, length in (("bursts", 30), ("shortgaps", 6)):
         miss = punch_gaps(2048, take.n_points, protocol, length, np.random.default_rng(0))
-        query = with_gaps(take, miss)
         for label, share in (("spline", 0.0), ("learned", learned)) * repeat:
             fills.AUTO_LEARNED = share
-            t = time.perf_counter()
-            out = fills.fill(query, "auto", kb=kb)
-            result.setdefault(f"{protocol}_{label}_s", []).append(time.perf_counter() - t)
-            result[f"{protocol}_{label}_rmse_missing_mm"] = rmse_mm(out, take, miss)
-        for label in ("spline", "learned"):
-            result[f"{protocol}_{label}_median_s"] = statistics.median(
-                result.pop(f"{protocol}_{label}_s"))
+            _timed_auto(result, f"{protocol}_{label}", take, miss, kb)
+        _medians(result, (f"{protocol}_spline", f"{protocol}_learned"))
     fills.AUTO_LEARNED = learned
     return result
 
