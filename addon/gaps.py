@@ -319,14 +319,17 @@ def how_filled(choices, bone, first, last):
     and the copies' estimate of its error as a share of the interpolation's (the largest where
     several, 0 where none judged it). No error in millimetres: an armature's copies foretell
     the share, not the level (docs/METHOD_NOTES.md, session 34)."""
-    from ..core.bonefill import CORROBORATE
+    from ..core.bonefill import CORROBORATE, CORROBORATE_LEARN
+
+    def paired(c):  # how far the kept interpolation went on to the two fills that agree
+        return CORROBORATE_LEARN if "learn" in c.corroborated.split(" + ") else CORROBORATE
 
     parts = [c for c in choices if c.bone == bone and c.first <= last and c.last >= first]
     if not parts:
         return "", 0.0, 0.0
     labels = [("interp" if c.share == 0 else c.method if c.share == 1
                else f"{c.method} ({c.share:.0%} of the way)")
-              + (f", the rest {CORROBORATE:.0%} to {c.corroborated}, which agree"
+              + (f", the rest {paired(c):.0%} to {c.corroborated}, which agree"
                  if c.corroborated else "")
               + (f", {c.cubic:.0%} to the cubic, which the take favours" if c.cubic else "")
               + (f", {c.learnt:.0%} to learn, which the bone's windows trust"

@@ -59,7 +59,8 @@ frames:
   only as far as the fills agree on the gap, and as far as it departs from ``interp`` beyond
   the error its copies expect of it (``AUTO_WARY``), and the part of the interpolation such a
   gap keeps goes half way on to the mean of two stacked fills that agree on it (``CORROBORATE``:
-  two estimates from different evidence bearing each other out); a gap of 0.4 s up to
+  two estimates from different evidence bearing each other out; on a gap ``learn`` is judged on,
+  ``learn`` may be one of them, and then ``CORROBORATE_LEARN`` of the way); a gap of 0.4 s up to
   ``MID_LEARN_SECONDS`` (0.6 s) with keys beyond its keys then goes ``MID_LEARN`` (a fifth) of
   the way on to ``learn``, too long to be judged by the copies there; in a take too short for
   copies, a long gap keeps ``interp`` where it and ``regress`` agree far more closely than
@@ -168,6 +169,12 @@ AUTO_WARY = 0.1
 #: chosen on non-test takes, docs/METHOD_NOTES.md, session 57)
 CORROBORATE = 0.5
 CORROBORATED = 0.45
+#: on a gap where ``learn`` is judged (under :data:`LEARN_SECONDS`, keys beyond its keys),
+#: ``learn`` - how the bone's own motion and the bones about it go on over the gap - may be one
+#: of that pair; a pair with it moves the kept part this share of the way instead (half of the
+#: way lost gaps on the held-back takes; chosen on non-test takes, docs/METHOD_NOTES.md,
+#: session 66)
+CORROBORATE_LEARN = 0.42
 #: and where the take's copies, all of them together, favour the cubic (``hermite``) over the
 #: interpolation - their mean log ratio of its squared joint error to the interpolation's lies
 #: below ``-CUBIC_TRUST`` - the part such a gap kept goes ``min(CUBIC_PULL, -mean -
@@ -275,7 +282,8 @@ class GapChoice:
     the fills named in ``towards`` (0: not at all; :data:`CONSENSUS_FILLS`, without a
     knowledge base :data:`TAKE_ALONE_CONSENSUS`, joined by " + "); ``corroborated``: the two
     fills (joined by " + ") whose mean the part of a short gap kept of the interpolation went
-    :data:`CORROBORATE` of the way on to, where they agree on the gap ("": none); ``cubic``: how
+    :data:`CORROBORATE` (with ``learn``: :data:`CORROBORATE_LEARN`) of the way on to, where
+    they agree on the gap ("": none); ``cubic``: how
     far the gap went towards the cubic (``hermite``) beside, where the take's copies favour it
     (:data:`CUBIC_TRUST`; 0: not at all); ``learnt``: how far it went towards ``learn``
     beside, where the bone's own windows trust it (:data:`LEARN_TRUST`; 0: not at all)."""
@@ -734,6 +742,7 @@ class _Job:
         expected = [float("nan")] * len(runs)  # the chosen fill's mean squared joint error
         pull = 0.0  # how far the kept interpolation of short gaps goes on to the cubic
         trusted = [False] * len(runs)  # short gaps whose kept interpolation goes on to learn
+        learns = np.zeros(len(runs), bool)  # short gaps where learn is judged
         longest = [rotations and not self.short(a, e)
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
@@ -824,7 +833,8 @@ class _Job:
         learn_mask = wanted.copy()  # learn fills these too; match's context is the gaps it fills
         for (b, a, e), middle in zip(runs, mid):
             learn_mask[a:e + 1, b] |= middle
-        with_learn = {"learn"} if any(trusted) or any(mid) else set()
+        paired = stack and CORROBORATE_LEARN > 0 and learns.any()
+        with_learn = {"learn"} if any(trusted) or any(mid) or paired else set()
         if wanted.any():
             made = self.candidates(channels, location, wanted,
                                    {name for name, _ in choice} | set(fills) | with_learn, seen,
@@ -833,7 +843,8 @@ class _Job:
                 made["stack"] = self._stacked(made, wanted, self.stack_fills,
                                               lambda b, a: table)
                 choice = self._doubted(made, runs, choice, expected)
-                corroborated = self._corroborated(made, runs, choice)
+                corroborated = self._corroborated(made, runs, choice,
+                                                  learns if paired else None)
             if any(longest):
                 made["stack_long"] = self._stacked(made, wanted, self.long_fills,
                                                    lambda b, a: long_table)
@@ -869,13 +880,15 @@ class _Job:
                                                                         self.towards) if on
                                          ).items())
         pairs = sum(pair is not None for pair in corroborated)
+        with_pairs_of_learn = any(pair and "learn" in pair for pair in corroborated)
         self.report("auto: " + ", ".join(
             f"{name} on {n} of {len(runs)} gaps"
             + (f" ({partly[name]} part of the way from the interpolation)" if partly[name] else "")
             for name, n in counts.items())
             + (f"; then {onwards}" if onwards else "")
             + (f"; the interpolated part of {pairs} short gaps {CORROBORATE:.0%} of the way on to "
-               "two fills that agree there" if pairs else "")
+               "two fills that agree there" + (f" ({CORROBORATE_LEARN:.0%} where one is learn)"
+                                               if with_pairs_of_learn else "") if pairs else "")
             + (f"; the interpolated part of the short gaps {pull:.0%} of the way on to the cubic, "
                "which the take's copies favour" if any(self.cubic) else "")
             + (f"; the interpolated part of {sum(map(bool, self.learnt))} short gaps "
@@ -891,7 +904,8 @@ class _Job:
             if pair or cubic or to_learn:  # about the interpolation: the fill's share, on the
                 # rest the pair's mean, the cubic and learn
                 fill = _about(seen[rows, b], [(made[name][rows, b], share)] + [
-                    (made[key][rows, b], CORROBORATE * (1 - share) / 2) for key in pair or ()]
+                    (made[key][rows, b], (CORROBORATE_LEARN if "learn" in pair else CORROBORATE)
+                     * (1 - share) / 2) for key in pair or ()]
                     + [(made[key][rows, b], weight) for key, weight
                        in (("hermite", cubic), ("learn", to_learn)) if weight])[:, None]
             elif name != "interp" and share:
@@ -966,21 +980,24 @@ class _Job:
             choice[i] = (name, share * cut)
         return choice
 
-    def _corroborated(self, made, runs, choice):
+    def _corroborated(self, made, runs, choice, learns=None):
         """Per gap shorter than :data:`LONG_STACK` that keeps part of the interpolation (share
         below 1), the two stacked fills (of :data:`STACK_FILLS` but ``interp``) that lie closest
         together as a share of their mean departure from ``interp`` (RMS over the joints the
         gap's bone moves), where that share is below :data:`CORROBORATED`: the cubic from the
         keys, the take's own regression and the knowledge base's motion owe each other nothing,
         so where two of them agree on a motion the interpolation lacks, it is there (on the
-        non-test takes, docs/METHOD_NOTES.md, session 57). None elsewhere."""
+        non-test takes, docs/METHOD_NOTES.md, session 57). ``learns`` (per gap, or None): where
+        ``learn`` may be one of the two (:data:`CORROBORATE_LEARN`; session 66). None
+        elsewhere."""
         fills = [f for f in self.stack_fills if f != "interp"]
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (_, share)) in enumerate(zip(runs, choice))
                  if share < 1 and self.short(a, e) and self.moved_by(b).any()]
         out = [None] * len(runs)
         if not spans or len(fills) < 2:
             return out
-        worlds = {key: self._spans(made[key], spans) for key in ("interp", *fills)}
+        more = [] if learns is None else ["learn"]
+        worlds = {key: self._spans(made[key], spans) for key in ("interp", *fills, *more)}
         for k, (i, b, _, _) in enumerate(spans):
             joints = self.moved_by(b)
             at = {key: world[k][:, joints] for key, world in worlds.items()}
@@ -988,9 +1005,10 @@ class _Job:
             def apart(x, y):
                 return np.sqrt(np.mean(np.sum((at[x] - at[y]) ** 2, axis=-1)))
 
+            some = fills + more if more and learns[i] else fills
             ratios = {(x, y): apart(x, y) / max(0.5 * (apart(x, "interp") + apart(y, "interp")),
                                                 1e-12)
-                      for m, x in enumerate(fills) for y in fills[m + 1:]}
+                      for m, x in enumerate(some) for y in some[m + 1:]}
             pair = min(ratios, key=ratios.get)
             if ratios[pair] < CORROBORATED:
                 out[i] = pair

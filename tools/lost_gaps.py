@@ -104,7 +104,8 @@ def run(out):
                         "first": int(a), "frames": int(e - a + 1), "joints": int(joints.sum()),
                         "method": choice.method, "share": choice.share,
                         "estimate": choice.estimate, "consensus": choice.consensus,
-                        "cubic": choice.cubic,
+                        "cubic": choice.cubic, "corroborated": choice.corroborated,
+                        "learnt": choice.learnt,
                         "departure_mm": 1000 * _rms(f - s),
                         "own_departure_mm": 1000 * _rms(alone[i][:, joints] - s),
                         # per other fill: its departure, distance to auto's fill, error

@@ -106,24 +106,28 @@ def test_a_marker_gap_names_every_estimate_blended_into_it(extension):
 
 def test_an_armature_gap_names_the_fills_it_went_to(extension):
     """The gap list's words for a bone's gaps: a share of a fill, the rest to an agreeing pair
-    and to the cubic the take's copies favour, to ``learn`` where the bone's windows trust it,
-    then on to ``learn`` on a gap of 0.4-0.6 s; the interpolation kept where nothing moved it."""
+    (less of the way where ``learn`` is one of it) and to the cubic the take's copies favour, to
+    ``learn`` where the bone's windows trust it, then on to ``learn`` on a gap of 0.4-0.6 s; the
+    interpolation kept where nothing moved it."""
     from mocap_gapfill.core.bonefill import GapChoice
 
     _, _, gaps, _ = modules()
     choices = [GapChoice("lShldr", 10, 24, "mix", 0.5, 0.6, corroborated="hermite + regress",
                          cubic=0.15),
                GapChoice("lShldr", 40, 54, "interp", 0.0, cubic=0.25),
-               GapChoice("lShldr", 70, 84, "interp", 0.0),
+               GapChoice("lShldr", 70, 84, "interp", 0.0, corroborated="hermite + learn"),
                GapChoice("lShldr", 100, 114, "learn", 0.4, 0.5, learnt=0.15),
                GapChoice("lShldr", 130, 189, "stack", 0.5, 0.7, consensus=0.2, towards="learn",
-                         corroborated="hermite + match")]
+                         corroborated="hermite + match"),
+               GapChoice("lShldr", 200, 214, "interp", 0.0)]
     assert gaps.how_filled(choices, "lShldr", 10, 24)[:2] == (
         "mix (50% of the way), the rest 50% to hermite + regress, which agree, 15% to the "
         "cubic, which the take favours", 0.6)
     assert gaps.how_filled(choices, "lShldr", 40, 54)[0] == (
         "interp, 25% to the cubic, which the take favours")
-    assert gaps.how_filled(choices, "lShldr", 70, 84)[0] == "interp"
+    assert gaps.how_filled(choices, "lShldr", 70, 84)[0] == (
+        "interp, the rest 42% to hermite + learn, which agree")
+    assert gaps.how_filled(choices, "lShldr", 200, 214)[0] == "interp"
     assert gaps.how_filled(choices, "lShldr", 100, 114)[0] == (
         "learn (40% of the way), 15% to learn, which the bone's windows trust")
     assert gaps.how_filled(choices, "lShldr", 130, 189)[0] == (
