@@ -108,6 +108,14 @@ AUTO_GONE_DOUBT = 4.0
 AUTO_LEARNED = 0.5
 #: ... on gaps of up to this many seconds (the longest the tuning takes' bursts had)
 AUTO_LEARNED_SECONDS = 0.5
+#: where nearly all of the body is gone at once - more than ``AUTO_ALL_GONE`` of the points on
+#: the mean over a marker's gap longer than :data:`AUTO_SPLINE_SECONDS` and of up to
+#: :data:`AUTO_LEARNED_SECONDS`, both ends in the take - its fill goes ``AUTO_ALL_GONE_SHARE`` of
+#: the way on to the take's own interpolator: the few partners and the models that see a few
+#: points stray further than their copies foretell (chosen on the tuning takes,
+#: docs/METHOD_NOTES.md, session 66)
+AUTO_ALL_GONE = 0.9
+AUTO_ALL_GONE_SHARE = 0.5
 #: beside the partner's pattern, a marker's short gap at a clip end joins the take's own
 #: interpolator from its one key (:func:`~.baselines.fill_learned_ends`) by its inverse error
 #: on one-sided copies times this weight (chosen on the tuning takes, docs/METHOD_NOTES.md,
@@ -157,11 +165,12 @@ class GapAccount:
     (the knowledge base's windows of motion), ``own`` (the take's own regression on the rest of
     the body), ``spline`` (a spline through the take, short gaps; half of the way on to the
     take's own interpolator there, :func:`_smooth_of`, and at a marker's clip end that
-    interpolator from the one key, :func:`~.baselines.fill_learned_ends`), ``pattern`` (a partner's
-    pattern: short gaps, and a point's long gaps within the knowledge base's side); on a marker
-    set the rigid partners' share is their mean over the gap's frames (:func:`_by_steadiness`).
-    Where an estimate has no value at some frame (no rigid donors there) the others fill it
-    alone.
+    interpolator from the one key, :func:`~.baselines.fill_learned_ends`, and where nearly all
+    of the body is gone, that interpolator, :func:`_with_all_gone_learnt`), ``pattern`` (a
+    partner's pattern: short gaps, and a point's long gaps within the knowledge base's side); on
+    a marker set the rigid partners' share is their mean over the gap's frames
+    (:func:`_by_steadiness`). Where an estimate has no value at some frame (no rigid donors
+    there) the others fill it alone.
     ``estimate``: the fill's RMS error in metres on copies of the point's gaps (the point hidden
     where it is observed, refilled as the gaps were), its rigid part scaled to how far the rigid
     donors spread over this gap (:func:`_harder_for_partners`), and where most of the body is
@@ -348,8 +357,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     short gaps (:data:`AUTO_SPLINE_SECONDS`) are last blended with that spline and a partner's
     pattern by their errors on copies of each gap (:func:`_with_spline`), those at a clip end
     with the pattern from the one end alone, by errors on one-sided copies
-    (:func:`_with_pattern_ends`); holes no estimate reached (dropped frames without a knowledge
-    base) take the spline alone (:func:`_with_holes_splined`). That spline goes half of the way
+    (:func:`_with_pattern_ends`); a marker's gap where nearly all of the body is gone goes
+    :data:`AUTO_ALL_GONE_SHARE` of the way on to the take's own interpolator
+    (:func:`_with_all_gone_learnt`); holes no estimate reached (dropped frames without a
+    knowledge base) take the spline alone (:func:`_with_holes_splined`). That spline goes half of the way
     on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's windows of a
     gap's length say how its points move on from their keys) over short gaps and where most of
     the body is gone (:func:`_learnt`). Last, the fill is moved onto
@@ -552,6 +563,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         eased.update(short)
         out, at_ends = _with_pattern_ends(motion, out, per_sample, weight == 0, rigid_of, report)
         eased.update(at_ends)
+    out, all_gone = _with_all_gone_learnt(motion, out, report)
     out, holes = _with_holes_splined(motion, out, report)
     eased.update({(p, a): (1.0, 0.0, float("nan")) for p, a in holes})
     gappy = missing.any(axis=0)
@@ -572,6 +584,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         kb_side = float(shares[a:b + 1, p].mean())
         spline_share, pattern_share, squared = eased.get(
             (p, a), (0.0, 0.0, per_sample[p] * harder(p, a, b, kb_side)))
+        if (p, a) in all_gone:  # the smooth track's share grows by the rest's part
+            spline_share += AUTO_ALL_GONE_SHARE * (1 - spline_share)
+            pattern_share *= 1 - AUTO_ALL_GONE_SHARE
         hold[a:b + 1, p] = motion.parents is None and b - a < _spline_frames(motion.fps)
         # (a held sample counts as known and sure where the others' fallback is taken)
         uncertainty[a:b + 1, p] = 0.0 if hold[a, p] else squared
@@ -1119,6 +1134,33 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
                f"interpolator from the one key carries a quarter or more of {learnt}, a "
                f"partner's pattern of {patterned}")
     return out, shares
+
+
+def _with_all_gone_learnt(motion, out, report):
+    """``out`` with each marker gap where nearly all of the body is gone at once
+    (:data:`AUTO_ALL_GONE`; longer than :data:`AUTO_SPLINE_SECONDS`, of up to
+    :data:`AUTO_LEARNED_SECONDS`, both ends in the take) moved :data:`AUTO_ALL_GONE_SHARE` of the
+    way on to the take's own interpolator (:func:`~.baselines.fill_learned`; a cubic spline where
+    the take has too few windows), and the set of those gaps (``(point, first frame)``). A
+    skeleton's joints keep their fill (not measured there)."""
+    missing = motion.missing
+    frames, shortest = len(missing), _spline_frames(motion.fps)
+    longest = AUTO_LEARNED_SECONDS * motion.fps
+    gaps = {(p, a): b for p, a, b in gap_runs(missing)
+            if 0 < a and b < frames - 1 and shortest < b - a + 1 <= longest
+            and missing[a:b + 1].mean() > AUTO_ALL_GONE}
+    if motion.parents is not None or not AUTO_ALL_GONE_SHARE or not gaps:
+        return out, set()
+    only = np.zeros_like(missing)
+    for p, a in gaps:
+        only[a, p] = True
+    learned = baselines.fill_learned(motion.positions, only=only)
+    out = out.copy()
+    for (p, a), b in gaps.items():
+        out[a:b + 1, p] += AUTO_ALL_GONE_SHARE * (learned[a:b + 1, p] - out[a:b + 1, p])
+    report(f"auto: {len(gaps)} gaps where nearly all of the body is gone go "
+           f"{AUTO_ALL_GONE_SHARE:.0%} of the way on to the take's own interpolator")
+    return out, set(gaps)
 
 
 def _with_holes_splined(motion, out, report):
