@@ -360,11 +360,11 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     (:func:`_with_pattern_ends`); a marker's gap where nearly all of the body is gone goes
     :data:`AUTO_ALL_GONE_SHARE` of the way on to the take's own interpolator
     (:func:`_with_all_gone_learnt`); holes no estimate reached (dropped frames without a
-    knowledge base) take the spline alone (:func:`_with_holes_splined`). That spline goes half of the way
-    on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's windows of a
-    gap's length say how its points move on from their keys) over short gaps and where most of
-    the body is gone (:func:`_learnt`). Last, the fill is moved onto
-    the distances the take keeps exactly, on a marker set towards those it keeps within a few
+    knowledge base) take the spline alone (:func:`_with_holes_splined`). That spline goes half
+    of the way on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's
+    windows of a gap's length say how its points move on from their keys) over short gaps and
+    where most of the body is gone (:func:`_learnt`). Last, the fill is moved onto the
+    distances the take keeps exactly, on a marker set towards those it keeps within a few
     millimetres (:func:`_with_distances_kept`).
     """
     import threading
