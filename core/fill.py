@@ -1020,10 +1020,10 @@ def _learnt(missing, probe, fps):
     return gaps, copies
 
 
-def _body_gone(missing, a, b):
-    """Whether more than :data:`AUTO_BODY_GONE` of the points are gone on the mean over the
-    frames ``a``-``b`` (a subject half out of the volume, a prop in the way, a dropped frame)."""
-    return bool(missing[a:b + 1].mean() > AUTO_BODY_GONE)
+def _body_gone(missing, a, b, share=AUTO_BODY_GONE):
+    """Whether more than ``share`` of the points are gone on the mean over the frames ``a``-``b``
+    (a subject half out of the volume, a prop in the way, a dropped frame)."""
+    return bool(missing[a:b + 1].mean() > share)
 
 
 def _off_the_spline(estimate, spline, missing, p, a, b, e_estimate, e_spline):
@@ -1143,13 +1143,13 @@ def _with_all_gone_learnt(motion, out, report):
     way on to the take's own interpolator (:func:`~.baselines.fill_learned`; a cubic spline where
     the take has too few windows), and the set of those gaps (``(point, first frame)``). A
     skeleton's joints keep their fill (not measured there)."""
+    if motion.parents is not None or not AUTO_ALL_GONE_SHARE:
+        return out, set()
     missing = motion.missing
-    frames, shortest = len(missing), _spline_frames(motion.fps)
-    longest = AUTO_LEARNED_SECONDS * motion.fps
-    gaps = {(p, a): b for p, a, b in gap_runs(missing)
-            if 0 < a and b < frames - 1 and shortest < b - a + 1 <= longest
-            and missing[a:b + 1].mean() > AUTO_ALL_GONE}
-    if motion.parents is not None or not AUTO_ALL_GONE_SHARE or not gaps:
+    gaps = {(p, a): b for p, a, b in _longer_gaps(missing, motion.fps)
+            if b - a + 1 <= AUTO_LEARNED_SECONDS * motion.fps
+            and _body_gone(missing, a, b, AUTO_ALL_GONE)}
+    if not gaps:
         return out, set()
     only = np.zeros_like(missing)
     for p, a in gaps:
@@ -1166,11 +1166,11 @@ def _with_all_gone_learnt(motion, out, report):
 def _with_holes_splined(motion, out, report):
     """``out`` with the holes no estimate reached filled by a cubic spline through the point's
     values (seen and filled; :func:`_smooth_of`): runs of a point's missing frames where ``out``
-    has no value, with a value on both sides. There no knowledge base models the point (none given, or it lacks
-    the point) and fewer than three of its rigid partners are seen: frames where every marker
-    is gone at once (a dropped camera frame, the subject out of the volume), whose neighbours
-    show where each one was. Runs at a clip's end stay open (nothing on the far side). Returns
-    the fill and the gaps the spline filled alone (``(point, first frame)``)."""
+    has no value, with a value on both sides. There no knowledge base models the point (none
+    given, or it lacks the point) and fewer than three of its rigid partners are seen: frames
+    where every marker is gone at once (a dropped camera frame, the subject out of the volume),
+    whose neighbours show where each one was. Runs at a clip's end stay open (nothing on the far
+    side). Returns the fill and the gaps the spline filled alone (``(point, first frame)``)."""
     missing = motion.missing
     hole = missing & np.isnan(out[..., 0])
     inside = np.zeros_like(hole)
