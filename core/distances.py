@@ -11,7 +11,8 @@ how uncertain each is (a seen sample does not move), sweeping over the pairs one
 turn about their line to be wrong; one on a seen segment, nothing. Markers on one segment keep
 their distances only within a few millimetres (skin slides): a pair is then a measurement of its
 distance with that spread, weighed against the ends' uncertainties (docs/METHOD_NOTES.md,
-session 48).
+session 48); as a body turns its joints such a distance drifts, so a gap may aim part of the way
+from the take's mean distance to the pair's own about the gap (session 67).
 """
 
 import numpy as np
@@ -21,7 +22,7 @@ SWEEPS = 20
 
 
 def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None,
-                   sweeps=SWEEPS):
+                   sweeps=SWEEPS, local=0.0):
     """``positions`` with its ``missing`` samples moved so that the points of each pair of
     ``pairs`` lie ``lengths`` apart, as far as each pair's ``spreads`` lets it.
 
@@ -40,6 +41,10 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None
         How far each pair's distance strays (SD, metres): a pair is kept as a measurement of
         that variance against the ends' uncertainties (compliant position-based dynamics,
         XPBD); None: every distance exactly.
+    local : float
+        At each frame where it moves, a pair aims this share of the way from its length to its
+        own distance there, interpolated linearly from the frames either side where both its
+        ends are seen (held beyond the first and last such frame): 0 the length alone.
 
     Returns
     -------
@@ -62,6 +67,8 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None
     for (a, b), length, alpha in zip(pairs, lengths, compliance):
         total = share[:, a] + share[:, b]
         frames = np.flatnonzero(total > 0)  # NaN (a sample without a fill) compares False
+        if frames.size and local:
+            length = length + local * (_about(out, missing, a, b, frames, length) - length)[:, None]
         if frames.size:
             steps.append((a, b, length, frames, share[frames, a][:, None],
                           share[frames, b][:, None], alpha, np.zeros((frames.size, 1))))
@@ -76,3 +83,14 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None
             out[frames, a] += share_a * more * toward
             out[frames, b] -= share_b * more * toward
     return out
+
+
+def _about(positions, missing, a, b, frames, length):
+    """The distance of points ``a`` and ``b`` at ``frames``, interpolated linearly from the
+    frames where both are seen (held beyond the first and last; ``length`` where they are never
+    seen together)."""
+    distance = np.linalg.norm(positions[:, a] - positions[:, b], axis=1)
+    seen = np.flatnonzero(~(missing[:, a] | missing[:, b]) & np.isfinite(distance))
+    if not seen.size:
+        return np.full(frames.size, float(length))
+    return np.interp(frames, seen, distance[seen])

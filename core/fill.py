@@ -36,6 +36,10 @@ AUTO_PROBE_FRAMES = 30
 #: each as far as its spread lets it (docs/METHOD_NOTES.md, session 48); a skeleton keeps its
 #: exact ones (baselines.RIGID_TIE) exactly
 AUTO_KEPT_SPREAD = 0.005
+#: on a marker set each such pair aims this share of the way from the take's mean distance to
+#: its own distance about the gap (interpolated from where both ends are seen): the distance
+#: drifts as the body turns its joints (docs/METHOD_NOTES.md, session 67)
+AUTO_KEPT_LOCAL = 0.5
 
 #: donors of ``auto``'s rigid-body estimate
 AUTO_DONORS = 3
@@ -606,7 +610,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
 def _with_distances_kept(motion, out, uncertainty, hold, report, partners):
     """The fill ``out`` with the take's missing samples moved onto the distances it keeps
     exactly (a skeleton) or towards those it keeps within :data:`AUTO_KEPT_SPREAD` (a marker
-    set, each pair as far as its spread lets it; :func:`~.baselines.steady_pairs`,
+    set, each pair as far as its spread lets it and aiming :data:`AUTO_KEPT_LOCAL` of the way
+    from its mean distance to its own about the gap; :func:`~.baselines.steady_pairs`,
     :func:`~.distances.keep_distances`), each by its expected squared error ``uncertainty``
     (where unknown: the largest known, else 1 m^2; at least :data:`~.baselines.RIGID_TIE`
     squared); the samples of ``hold`` (a marker's short gaps) keep their place. The gaps'
@@ -628,12 +633,13 @@ def _with_distances_kept(motion, out, uncertainty, hold, report, partners):
     uncertainty = np.where(missing & ~hold, np.maximum(np.where(known, uncertainty, fallback),
                                                        baselines.RIGID_TIE ** 2), 0.0)
     kept = keep_distances(out, missing, uncertainty, pairs, lengths,
-                          spreads if markers else None)
+                          spreads if markers else None, local=AUTO_KEPT_LOCAL if markers else 0.0)
     moved = np.linalg.norm(kept - out, axis=2)[missing]
     moved = moved[np.isfinite(moved)]
     if moved.size:
         report(f"auto: filled samples moved towards the {len(pairs)} distances the take keeps"
-               + (f" within {1000 * AUTO_KEPT_SPREAD:g} mm (markers on one segment)" if markers
+               + (f" within {1000 * AUTO_KEPT_SPREAD:g} mm (markers on one segment; each "
+                  f"{AUTO_KEPT_LOCAL:.0%} of the way to its own distance about the gap)" if markers
                   else " exactly (a bone's length, joints on one segment)")
                + f": median {1000 * np.median(moved):.1f} mm, at most "
                f"{1000 * moved.max():.1f} mm")

@@ -58,6 +58,25 @@ def test_a_pairs_correction_goes_to_the_end_less_sure_of_its_place():
     assert np.isnan(kept[2, 2]).all() and (kept[2, 1] == guess[2, 1]).all()
 
 
+def test_a_pair_can_aim_at_its_own_distance_about_the_gap():
+    """A marker pair's distance drifts as the body turns (1.0 m before a gap, 1.2 m after it):
+    with ``local`` the filled end aims that share of the way from the take's mean distance to
+    the pair's own, interpolated across the gap from where both are seen."""
+    frames = 11
+    truth = np.zeros((frames, 2, 3))
+    truth[:, 1, 0] = np.linspace(1.0, 1.2, frames)
+    missing = np.zeros((frames, 2), bool)
+    missing[3:8, 1] = True
+    guess = truth.copy()
+    guess[3:8, 1, 0] = 0.9
+    args = guess, missing, np.ones(missing.shape), np.array([[0, 1]]), np.array([1.05])
+    mean, own, half = (keep_distances(*args, local=share)[3:8, 1, 0] for share in (0, 1, 0.5))
+    np.testing.assert_allclose(mean, 1.05)
+    np.testing.assert_allclose(own, truth[3:8, 1, 0])
+    np.testing.assert_allclose(half, (1.05 + truth[3:8, 1, 0]) / 2)
+    assert (keep_distances(*args, local=1)[~missing] == guess[~missing]).all()
+
+
 def test_steady_pairs_are_a_skeletons_bones_and_segments_and_a_markers_segment(data_dir):
     daz = read_motion(data_dir / "cmu/bvh/daz_friendly/07/07_05.bvh.gz")
     pairs, lengths = baselines.steady_pairs(daz.positions)[:2]
@@ -140,3 +159,31 @@ def test_auto_keeps_a_marker_sets_steady_distances_as_far_as_they_hold(data_dir,
     loose = fills.fill(query, "auto", kb=kb)
     print(rmse_mm(kept, take, miss), rmse_mm(loose, take, miss))
     assert rmse_mm(kept, take, miss) < 0.85 * rmse_mm(loose, take, miss)
+
+
+def test_a_markers_isolated_gaps_aim_at_its_partners_distances_about_the_gap(data_dir,
+                                                                              monkeypatch):
+    """One marker gone at a time for a quarter of a second (the commonest real gap: the rest of
+    the body seen), CMU tuning take 02_05 at 60 fps, a KB of 06_01 and 135_02. The distances to
+    a marker's partners on its segment drift as the joints turn; moved towards the take's mean
+    distance, a fill that the rigid partners had placed to a millimetre or two went off it, and
+    half of the way to each pair's own distance about the gap it does not (when written: 2.19
+    mm, 2.37 with the mean alone, `rigid` 2.43; on the four CMU tuning takes' isolated gaps of
+    0.25 s, 0.950 of the mean alone)."""
+    c3d = data_dir / "cmu/c3d"
+    kb = build_kb([c3d / "06_01.c3d", c3d / "135_02.c3d"], fps=60.0)
+    take = complete_take(read_motion(c3d / "02_05.c3d"), kb.names, 60.0)
+    rng = np.random.default_rng(0)
+    miss = np.zeros((take.n_frames, take.n_points), bool)
+    for start in range(10, take.n_frames - 25, 75):
+        miss[start:start + 15, rng.integers(take.n_points)] = True
+    query = with_gaps(take, miss)
+    messages = []
+    local = rmse_mm(fills.fill(query, "auto", kb=kb, report=messages.append), take, miss)
+    assert any("50% of the way to its own distance about the gap" in m for m in messages)
+    monkeypatch.setattr(fills, "AUTO_KEPT_LOCAL", 0.0)
+    mean = rmse_mm(fills.fill(query, "auto", kb=kb), take, miss)
+    rigid = rmse_mm(fills.fill(query, "rigid"), take, miss)
+    print(local, mean, rigid)
+    assert local < 0.96 * mean and local < 0.95 * rigid
+
