@@ -627,6 +627,9 @@ def _with_distances_kept(motion, out, uncertainty, hold, report, partners):
         motion.positions, AUTO_KEPT_SPREAD if markers else baselines.RIGID_TIE, partners)
     if not (missing[:, pairs[:, 0]] | missing[:, pairs[:, 1]]).any():
         return out
+    # the fill holds estimates of the missing samples alone where the knowledge base gave none:
+    # the seen ends of the pairs are where the take saw them
+    out = np.where(missing[..., None], out, motion.positions)
     known = np.isfinite(uncertainty) & missing
     fallback = uncertainty[known].max() if known.any() else 1.0
     # no filled sample that moves is surer of its place than the rounding of a rigid tie
