@@ -67,8 +67,9 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None
     for (a, b), length, alpha in zip(pairs, lengths, compliance):
         total = share[:, a] + share[:, b]
         frames = np.flatnonzero(total > 0)  # NaN (a sample without a fill) compares False
-        if frames.size and local:
-            length = length + local * (_about(out, missing, a, b, frames, length) - length)[:, None]
+        if frames.size and local:  # part of the way to the pair's own distance about the gap
+            own = _about(out, missing, a, b, frames, length)
+            length = length + local * (own - length)[:, None]
         if frames.size:
             steps.append((a, b, length, frames, share[frames, a][:, None],
                           share[frames, b][:, None], alpha, np.zeros((frames.size, 1))))
