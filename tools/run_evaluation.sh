@@ -91,6 +91,10 @@ $MG evaluate --protocol bones --quiet --skip-frames 6 --no-kb --methods interp b
 $MG evaluate --protocol bones --quiet --no-kb --methods interp bezier auto \
   --test "${AMC31[@]}" \
   --json docs/results/bones_amc31_no_kb.json
+$MG evaluate --protocol joints --quiet --skip-frames 6 --no-kb --methods auto rigid pattern spline \
+  --test "${BVH43[@]}" --json docs/results/joints_bvh43_no_kb.json
+$MG evaluate --protocol joints --quiet --no-kb --methods auto rigid pattern spline \
+  --test "${AMC31[@]}" --json docs/results/joints_amc31_no_kb.json
 $MG evaluate --protocol markers --quiet --fps 120 --no-kb --methods auto rigid pattern \
   --test "$D"/cmu/c3d/85_02.c3d --json docs/results/markers_cmu_no_kb.json
 $MG evaluate --protocol markers --quiet --fps 120 --no-kb --methods auto rigid pattern \
