@@ -348,7 +348,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     (:func:`~.regression.regress_in_frame`: skin slides, a marker near a joint moves among its
     donors) joins the rigid-body fill by their errors on the copies. Copies shorter
     than the gaps do not vouch for the rigid estimate beyond its donors' spread
-    (:data:`AUTO_SPREAD_CAP`). On points with long gaps
+    (:data:`AUTO_SPREAD_CAP`). On a marker set, a gap where more than :data:`AUTO_BODY_GONE` of
+    the points are gone leaves the knowledge base out (:func:`_models_left_out_where_gone`: its
+    models see too little of the body). On points with long gaps
     (:data:`AUTO_MATCH_SECONDS`) the knowledge base's estimate is its models' fill and its
     windows of motion (:func:`~.matching.fill_match`) weighted by their errors on the copies,
     the windows only where they refill them better, and then the take's own regression of the
@@ -536,6 +538,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     shares = np.broadcast_to(weight, missing.shape)
     if markers:
         shares = _by_steadiness(weight, e_kb, e_rigid, *spreads)
+    if motion.parents is None and kb is not None:
+        shares, knn = _models_left_out_where_gone(missing, shares, knn)
     out = _blend(knn, rigid, shares)
     if probe.any():
         if long.any():
@@ -732,6 +736,24 @@ def _by_steadiness(weight, e_kb, e_rigid, squared, on_copies):
         share = scaled / (e_kb[None] + scaled)
     judged = (0 < weight) & (weight < 1)
     return np.where(judged[None] & np.isfinite(share), share, weight[None])
+
+
+def _models_left_out_where_gone(missing, shares, knn):
+    """The knowledge base's share per frame (``shares``) and estimate (``knn``) with both left
+    out of each marker's gap where more than :data:`AUTO_BODY_GONE` of the points are gone on the
+    mean over it: its models see too little of the body there, and the gap is filled as a take
+    without a knowledge base fills it (the rigid partners left, then the spline and the take's
+    own interpolator; chosen on the CMU C3D tuning takes' bursts, docs/METHOD_NOTES.md, session
+    67)."""
+    gone = [(p, a, b) for p, a, b in gap_runs(missing) if _body_gone(missing, a, b)]
+    if not gone:
+        return shares, knn
+    shares = np.array(np.broadcast_to(shares, missing.shape), dtype=float)
+    knn = knn.copy()
+    for p, a, b in gone:
+        shares[a:b + 1, p] = 0.0
+        knn[a:b + 1, p] = np.nan
+    return shares, knn
 
 
 def _mix_in(knn, other, share):
