@@ -992,18 +992,13 @@ def test_auto_leans_on_the_takes_own_interpolator_where_nearly_all_of_the_body_i
     30: auto 30.6, without it 31.8, spline 35.8 (01_01's of 60: 32.8 against 33.1)."""
     from mocap_gapfill.core import fill as fill_module
 
-    take, kb = _cmu_first_frames(data_dir, "135_02", ("02_05", "01_01"))
-    off = (fill_module, "AUTO_ALL_GONE_SHARE", 0.0)
-    bursts = _auto_against(take, kb, "bursts", 30, monkeypatch, *off)
-    print(bursts)
+    bursts, miss, accounts, few = _a_burst_rule(data_dir, monkeypatch, "135_02",
+                                                ("02_05", "01_01"), 30,
+                                                (fill_module, "AUTO_ALL_GONE_SHARE", 0.0))
     assert bursts["auto"] < 0.98 * bursts["patched"]
-    miss = punch_gaps(take.n_frames, take.n_points, "bursts", 30,
-                      np.random.default_rng([0, *b"l=30"]))
-    _, accounts = fill(with_gaps(take, miss), "auto", kb=kb, return_account=True)
     gone = [g for g in accounts if miss[g.first:g.last + 1].mean() > fill_module.AUTO_ALL_GONE
-            and g.first > 0 and g.last < take.n_frames - 1]
+            and g.first > 0 and g.last < len(miss) - 1]
     assert gone and all(g.spline >= fill_module.AUTO_ALL_GONE_SHARE for g in gone)
-    few = _auto_against(take, kb, "markers", 0.1, monkeypatch, *off)
     assert few["auto"] == few["patched"]
 
 
@@ -1018,18 +1013,27 @@ def test_auto_leaves_the_models_out_of_a_gap_where_most_of_the_body_is_gone(data
     auto 32.8, with the models 37.4, spline 58.9."""
     from mocap_gapfill.core import fill as fill_module
 
-    take, kb = _cmu_first_frames(data_dir, "01_01", ("02_05", "135_02"))
-    off = (fill_module, "_models_left_out_where_gone", lambda missing, shares, knn: (shares, knn))
-    bursts = _auto_against(take, kb, "bursts", 60, monkeypatch, *off)
-    print(bursts)
+    kept = (fill_module, "_models_left_out_where_gone", lambda missing, shares, knn: (shares, knn))
+    bursts, miss, accounts, few = _a_burst_rule(data_dir, monkeypatch, "01_01",
+                                                ("02_05", "135_02"), 60, kept)
     assert bursts["auto"] < 0.95 * bursts["patched"]
-    miss = punch_gaps(take.n_frames, take.n_points, "bursts", 60,
-                      np.random.default_rng([0, *b"l=60"]))
-    _, accounts = fill(with_gaps(take, miss), "auto", kb=kb, return_account=True)
     gone = [g for g in accounts if miss[g.first:g.last + 1].mean() > fill_module.AUTO_BODY_GONE]
     assert gone and all(g.models == g.windows == g.own == 0 for g in gone)
-    few = _auto_against(take, kb, "markers", 0.1, monkeypatch, *off)
     assert few["auto"] == few["patched"]
+
+
+def _a_burst_rule(data_dir, patch, name, others, length, off):
+    """A rule of ``auto`` for bursts measured on the first 1,800 complete frames of CMU take
+    ``name`` (a KB of ``others``): ``auto`` against ``auto`` with ``off`` (target, name, value)
+    patched on bursts of ``length`` frames (:func:`_auto_against`), the bursts' mask, ``auto``'s
+    accounts of them, and the same pair on the `markers` protocol at 10 %."""
+    take, kb = _cmu_first_frames(data_dir, name, others)
+    bursts = _auto_against(take, kb, "bursts", length, patch, *off)
+    print(bursts)
+    miss = punch_gaps(take.n_frames, take.n_points, "bursts", length,
+                      np.random.default_rng([0, *f"l={length}".encode()]))
+    accounts = fill(with_gaps(take, miss), "auto", kb=kb, return_account=True)[1]
+    return bursts, miss, accounts, _auto_against(take, kb, "markers", 0.1, patch, *off)
 
 
 def test_auto_carries_the_spline_by_the_partners_left_where_most_of_the_body_is_gone(
