@@ -67,10 +67,10 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None
     for (a, b), length, alpha in zip(pairs, lengths, compliance):
         total = share[:, a] + share[:, b]
         frames = np.flatnonzero(total > 0)  # NaN (a sample without a fill) compares False
-        if frames.size and local:  # part of the way to the pair's own distance about the gap
-            own = _about(out, missing, a, b, frames, length)
-            length = length + local * (own - length)[:, None]
         if frames.size:
+            if local:  # part of the way to the pair's own distance about the gap
+                own = _own_distance(out, missing, a, b, frames, length)
+                length = length + local * (own - length)[:, None]
             steps.append((a, b, length, frames, share[frames, a][:, None],
                           share[frames, b][:, None], alpha, np.zeros((frames.size, 1))))
     for _ in range(sweeps):
@@ -86,7 +86,7 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None
     return out
 
 
-def _about(positions, missing, a, b, frames, length):
+def _own_distance(positions, missing, a, b, frames, length):
     """The distance of points ``a`` and ``b`` at ``frames``, interpolated linearly from the
     frames where both are seen (held beyond the first and last; ``length`` where they are never
     seen together)."""
