@@ -1037,10 +1037,13 @@ class _Job:
     def _stacked(self, made, mask, fills, table_of):
         """``stack``: on each run of ``mask`` the ``fills`` weighed together frame by frame
         (rotations about ``interp``'s, locations on the line), the weights from
-        ``table_of(bone, first frame of the run)``."""
+        ``table_of(bone, first frame of the run)``, each frame's by its distance from the run's
+        keys: at a clip end from its one key."""
         out = made["interp"].copy()
+        last = len(mask) - 1
         for b, a, e in gap_runs(mask):
-            w = stacking.frame_weights(table_of(b, a), e - a + 1, self.fps)
+            key = "both" if (a == 0) == (e == last) else "after" if a == 0 else "before"
+            w = stacking.frame_weights(table_of(b, a), e - a + 1, self.fps, key)
             out[a:e + 1, b] = _about(out[a:e + 1, b], [(made[name][a:e + 1, b], w[:, k:k + 1])
                                                        for k, name in enumerate(fills)])
         return out

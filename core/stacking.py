@@ -24,13 +24,17 @@ DISTANCES = np.array([1, 2, 3, 5, 8, 12, 18, 27, 40, 60, 90]) / 120.0
 LENGTHS = np.array([0, 20, 45, 90, 180]) / 120.0
 
 
-def classes(length, fps):
+def classes(length, fps, key="both"):
     """Per frame of a gap of ``length`` frames: its distance class (``(length,)`` int) and the
-    gap's length class (int)."""
+    gap's length class (int). ``key``: where its keys are, ``"both"`` ends, or only ``"after"``
+    it (a gap at the clip's start) or ``"before"`` it (at its end): there a frame's distance is
+    to the one key, and the gap's length class that of a gap with keys at both ends and as far
+    from them (twice as long)."""
     t = np.arange(length)
-    away = np.minimum(t + 1, length - t) / fps
-    near = np.clip(np.searchsorted(DISTANCES, away + 1e-9, side="right") - 1, 0, None)
-    return near, int(np.searchsorted(LENGTHS, length / fps + 1e-9, side="right") - 1)
+    away = {"both": np.minimum(t + 1, length - t), "before": t + 1, "after": length - t}[key]
+    near = np.clip(np.searchsorted(DISTANCES, away / fps + 1e-9, side="right") - 1, 0, None)
+    span = length if key == "both" else 2 * length
+    return near, int(np.searchsorted(LENGTHS, span / fps + 1e-9, side="right") - 1)
 
 
 def moments(errors, fps):
@@ -79,7 +83,8 @@ def weights(sums, counts, ridge):
     return table
 
 
-def frame_weights(table, length, fps):
-    """(length, fills): the table's weights for each frame of a gap of ``length`` frames."""
-    near, size = classes(length, fps)
+def frame_weights(table, length, fps, key="both"):
+    """(length, fills): the table's weights for each frame of a gap of ``length`` frames
+    (``key``: as in :func:`classes`)."""
+    near, size = classes(length, fps, key)
     return table[near, size]

@@ -630,7 +630,7 @@ def test_stacking_weighs_each_fill_where_it_is_right():
     """Two fills of copies of 0.5 s gaps at 120 fps: one exact next to the keys and drifting
     away from them (a curve carried on from the keys), one off by the same amount all through
     (motion from elsewhere). The weights follow the first near the keys and the second in the
-    middle; fills whose errors cancel get equal weights; classes without copies borrow from
+    middle, and at a clip end's gap by the distance from its one key; fills whose errors cancel get equal weights; classes without copies borrow from
     the nearest; no copies at all: equal weights."""
     rng = np.random.default_rng(0)
     length, fps = 60, 120.0
@@ -647,6 +647,12 @@ def test_stacking_weighs_each_fill_where_it_is_right():
     assert w[0, 0] > 0.95 and w[length // 2, 1] > 0.8
     longer = stacking.frame_weights(table, 4 * length, fps)  # no copies that long
     assert np.allclose(longer[:length // 2], w[:length // 2])
+    # a gap at the clip's end has one key: its last frame is furthest from it, the first of a
+    # gap at the clip's start likewise; half as long, it lies as far from its key as the copies
+    end = stacking.frame_weights(table, length // 2, fps, "before")
+    start = stacking.frame_weights(table, length // 2, fps, "after")
+    assert np.allclose(end, start[::-1]) and np.allclose(end, w[:length // 2])
+    assert end[0, 0] > 0.95 and end[-1, 1] > 0.8
     noise = rng.normal(size=(length, 6))
     s, c = stacking.moments([noise, -noise], fps)
     assert np.allclose(stacking.frame_weights(stacking.weights(s, c, 0.0), length, fps), 0.5)
