@@ -630,8 +630,9 @@ def test_stacking_weighs_each_fill_where_it_is_right():
     """Two fills of copies of 0.5 s gaps at 120 fps: one exact next to the keys and drifting
     away from them (a curve carried on from the keys), one off by the same amount all through
     (motion from elsewhere). The weights follow the first near the keys and the second in the
-    middle, and at a clip end's gap by the distance from its one key; fills whose errors cancel get equal weights; classes without copies borrow from
-    the nearest; no copies at all: equal weights."""
+    middle, on a gap at a clip end by the distance from its one key; fills whose errors cancel
+    get equal weights; classes without copies borrow from the nearest; no copies at all: equal
+    weights."""
     rng = np.random.default_rng(0)
     length, fps = 60, 120.0
     away = np.minimum(np.arange(length) + 1, length - np.arange(length))
