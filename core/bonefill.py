@@ -143,6 +143,14 @@ LONG_STACK_FILLS = STACK_FILLS + ("regress_pose", "regress_kernel")
 #: little (chosen on non-test takes, docs/METHOD_NOTES.md, session 35)
 CONSENSUS = 0.5
 CONSENSUS_FILLS = ("match", "regress_kernel")
+#: a gap at a clip's end (one key: Blender holds it) where those two agree - lie apart by less
+#: than :data:`CORROBORATED` times their mean departure from the held key (RMS over the joints
+#: the bone moves) - goes this share of the way on from its fill (and its consensus) to their
+#: mean: its copies, with keys at both ends, judge its fills against an interpolation far
+#: stronger than the held key, and two estimates from different evidence that bear each other
+#: out say what the key lacks (:meth:`_Job._ends_agreed`; chosen by leave-one-subject-out on
+#: non-test takes, docs/METHOD_NOTES.md, session 68)
+ENDS_SHARE = 1.0
 #: in a take with copies, a gap from :data:`LEARN_SECONDS` up to ``MID_LEARN_SECONDS`` with keys
 #: beyond its keys (too long for ``learn`` to be judged) goes this share of the way on from its
 #: fill to ``learn``, the bone's own interpolator: alone it carries the keys' motion too far at
@@ -280,7 +288,8 @@ class GapChoice:
     mean, drawn towards the take's mean over all copies as ``auto`` scores them); NaN where no
     copies judged the gap; ``consensus``: how far the fill then went on towards the mean of
     the fills named in ``towards`` (0: not at all; :data:`CONSENSUS_FILLS`, without a
-    knowledge base :data:`TAKE_ALONE_CONSENSUS`, joined by " + "); ``corroborated``: the two
+    knowledge base :data:`TAKE_ALONE_CONSENSUS`, joined by " + "; at a clip end where those two
+    agree, :data:`ENDS_SHARE` of the rest of the way too); ``corroborated``: the two
     fills (joined by " + ") whose mean the part of a short gap kept of the interpolation went
     :data:`CORROBORATE` (with ``learn``: :data:`CORROBORATE_LEARN`) of the way on to, where
     they agree on the gap ("": none); ``cubic``: how
@@ -755,6 +764,10 @@ class _Job:
         mid = [rotations and bool(copies) and (b, a, e) in learnable
                and LEARN_SECONDS * self.fps <= e - a + 1 < MID_LEARN_SECONDS * self.fps
                for b, a, e in runs]
+        # gaps at a clip end, where the consensus fills may agree on what the held key lacks
+        last = len(gaps) - 1
+        ends = [rotations and not alone and ENDS_SHARE > 0 and (a == 0) != (e == last)
+                for _, a, e in runs]
         fills = self.long_fills if any(longest) else self.stack_fills if stack else ()
         if any(unjudged):
             fills += tuple(f for f in self.consensus_fills if f not in fills)
@@ -853,6 +866,11 @@ class _Job:
         elif any(mid):
             made = self.candidates(channels, location, learn_mask, with_learn, seen,
                                    learn_on=(gaps, learn_mask))
+        # the pair at clip ends as each fills the take's gaps alone (neither is judged there)
+        paired_ends = self.candidates(channels, location, gaps, ("interp", *self.consensus_fills),
+                                      seen) \
+            if any(ends) and len(self.consensus_fills) == 2 else {}
+        agreed = self._ends_agreed(paired_ends, runs, ends)
         wanted = learn_mask
         towards = self.consensus_fills
         agree = CONSENSUS if wanted.any() and set(towards) <= set(made) else 0.0
@@ -868,6 +886,9 @@ class _Job:
                           for (name, share), on, middle in zip(choice, onward, mid)]
         self.towards = [("learn",) if middle else towards if on else ()
                         for on, middle in zip(self.consensus, mid)]
+        for i in np.flatnonzero(agreed):  # on from the fill and its consensus, if any
+            self.consensus[i] = 1 - (1 - self.consensus[i]) * (1 - ENDS_SHARE)
+            self.towards[i] = self.consensus_fills
         counts, partly = {}, {}
         for name, share in choice:
             name = name if share else "interp"  # doubted all the way back
@@ -893,13 +914,15 @@ class _Job:
                "which the take's copies favour" if any(self.cubic) else "")
             + (f"; the interpolated part of {sum(map(bool, self.learnt))} short gaps "
                f"{LEARN_PULL:.0%} of the way on to learn, which the bone's own windows trust"
-               if any(self.learnt) else ""))
-        if not wanted.any():
+               if any(self.learnt) else "")
+            + (f"; {sum(agreed)} gaps at a clip end {ENDS_SHARE:.0%} of the way on to "
+               f"{' + '.join(self.consensus_fills)}, which agree there" if any(agreed) else ""))
+        if not wanted.any() and not agreed.any():
             return seen
         out = seen.copy()
-        for (b, a, e), (name, share), further, onto, pair, cubic, to_learn in zip(
+        for (b, a, e), (name, share), further, onto, pair, cubic, to_learn, end in zip(
                 runs, choice, self.consensus, self.towards, corroborated, self.cubic,
-                self.learnt):
+                self.learnt, agreed):
             rows, span = slice(a, e + 1), np.ones((e - a + 1, 1), bool)
             if pair or cubic or to_learn:  # about the interpolation: the fill's share, on the
                 # rest the pair's mean, the cubic and learn
@@ -913,9 +936,10 @@ class _Job:
             else:
                 fill = seen[rows, b:b + 1]
             if further:  # the mean of the fills, each of k taking 1/k of the way
-                target = made[onto[0]][rows, b:b + 1]
+                source = paired_ends if end else made
+                target = source[onto[0]][rows, b:b + 1]
                 for k, key in enumerate(onto[1:], 2):
-                    target = halfway(target, made[key][rows, b:b + 1], span, 1 / k)
+                    target = halfway(target, source[key][rows, b:b + 1], span, 1 / k)
                 fill = halfway(fill, target, span, further)
             out[rows, b] = fill[:, 0]
         return out
@@ -979,6 +1003,27 @@ class _Job:
                 cut *= max(0.0, 1 - AUTO_WARY * expected[i] / max(departure, 1e-18))
             choice[i] = (name, share * cut)
         return choice
+
+    def _ends_agreed(self, made, runs, ends):
+        """Per gap, whether it lies at a clip end (``ends``) where the fills of
+        :data:`CONSENSUS_FILLS` in ``made`` lie apart by less than :data:`CORROBORATED` times
+        their mean departure from the held key (RMS over the joints the gap's bone moves)."""
+        spans = [(i, b, a, e - a + 1) for i, ((b, a, e), end) in enumerate(zip(runs, ends))
+                 if end and self.moved_by(b).any()]
+        out = np.zeros(len(runs), bool)
+        if not spans or not made:
+            return out
+        x, y = self.consensus_fills
+        worlds = {key: self._spans(made[key], spans) for key in ("interp", x, y)}
+        for k, (i, b, _, _) in enumerate(spans):
+            at = {key: world[k][:, self.moved_by(b)] for key, world in worlds.items()}
+
+            def apart(p, q):
+                return np.sqrt(np.mean(np.sum((at[p] - at[q]) ** 2, axis=-1)))
+
+            away = 0.5 * (apart(x, "interp") + apart(y, "interp"))
+            out[i] = away > 0 and apart(x, y) < CORROBORATED * away
+        return out
 
     def _corroborated(self, made, runs, choice, learns=None):
         """Per gap shorter than :data:`LONG_STACK` that keeps part of the interpolation (share

@@ -776,6 +776,50 @@ def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk,
     assert rmse(auto) < 0.9 * base
 
 
+def test_a_gap_at_a_clip_end_goes_to_the_consensus_where_its_two_fills_agree(walk, daz_kb,
+                                                                            monkeypatch):
+    """``_Job._ends_agreed`` on the walk's real poses: a gap at a clip end (Blender holds its one
+    key) where the knowledge base's motion and the take's own regression agree goes all the way
+    to their mean; where they lie as far apart as they depart from the held key, or the gap has
+    keys at both ends, nothing changes. Then ``auto`` on the walk (its subject out of the KB):
+    three bones keyless for the first second and three others for the last (the ``bone-ends``
+    protocol's n=3, l=120), measured 47.1 mm with the rule and 53.0 without it, the held key
+    151.0 mm (session 68)."""
+    rig, channels, location, fps = walk
+    b = rig.names.index("lShldr")
+    last = len(channels) - 1
+    gaps = np.zeros(channels.shape[:2], bool)
+    gaps[:40, b] = gaps[300:340, b] = gaps[last - 39:, b] = True
+    truth = basis_matrices(rig, channels, location)
+    interp = basis_matrices(rig, interpolate_channels(channels, gaps), location)
+    job = bonefill._Job(rig, fps, daz_kb, rig.roots, np.eye(4), None, None, None, None)
+    runs = gap_runs(gaps)
+    ends = [True, False, True]
+    near = {"interp": interp, "match": truth, "regress_kernel": truth}  # the two agree
+    assert list(job._ends_agreed(near, runs, ends)) == [True, False, True]
+    assert list(job._ends_agreed(near, runs, [False] * 3)) == [False] * 3
+    far = dict(near, regress_kernel=interp)  # as far apart as each departs from the held key
+    assert not job._ends_agreed(far, runs, ends).any()
+    # on the walk's own clip ends, with and without the rule
+    gaps = punch_bone_gaps(rig, len(channels), (3, 120), ends=True)
+    seen = interpolate_channels(channels, gaps)
+    unknown = rig.moved(gaps)
+    joints = rig.joints(truth)
+
+    def rmse(basis):
+        return 1000 * np.sqrt(np.mean(np.sum((rig.joints(basis) - joints) ** 2,
+                                             axis=2)[unknown]))
+
+    auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, return_choices=True)
+    assert any(c.consensus == 1.0 and c.towards == "match + regress_kernel" for c in choices)
+    monkeypatch.setattr(bonefill, "ENDS_SHARE", 0.0)
+    without = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb)
+    base = rmse(basis_matrices(rig, seen, location))
+    print(f"\n07_05, clip ends, 3 bones for 1 s: auto {rmse(auto):.1f} mm, without the rule "
+          f"{rmse(without):.1f}, held key {base:.1f}")
+    assert rmse(auto) < 0.93 * rmse(without) < 0.5 * base
+
+
 def test_a_take_whose_copies_favour_the_cubic_takes_it_on_the_short_gaps_it_kept(
         data_dir, daz_rotation_kb, monkeypatch):
     """Where all the take's copies together favour the cubic over the interpolation (Daz 08_02,
