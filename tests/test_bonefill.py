@@ -702,6 +702,14 @@ def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, d
     assert job._doubted(dict(scatter, stack_long=truth), runs, longs, [1.0, 1.0]) == longs
 
 
+def _joint_rmse(rig, truth, gaps):
+    """The RMSE in mm of a fill's basis matrices against ``truth``'s over the joints ``gaps``
+    move."""
+    unknown, joints = rig.moved(gaps), rig.joints(truth)
+    return lambda basis: 1000 * np.sqrt(np.mean(np.sum((rig.joints(basis) - joints) ** 2,
+                                                       axis=2)[unknown]))
+
+
 def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk, daz_kb,
                                                                            monkeypatch):
     """``_Job._corroborated`` on the walk's real poses: where two of the stacked fills (the
@@ -755,13 +763,7 @@ def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk,
     for start in range(15, len(channels) - 15, 30):
         gaps[start:start + 15, rng.choice(candidates)] = True
     seen = interpolate_channels(channels, gaps)
-    unknown = rig.moved(gaps)
-    joints = rig.joints(truth)
-
-    def rmse(basis):
-        return 1000 * np.sqrt(np.mean(np.sum((rig.joints(basis) - joints) ** 2,
-                                             axis=2)[unknown]))
-
+    rmse = _joint_rmse(rig, truth, gaps)
     auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, return_choices=True)
     assert any(c.corroborated for c in choices)
     monkeypatch.setattr(bonefill, "CORROBORATE_LEARN", 0.0)
@@ -803,13 +805,7 @@ def test_a_gap_at_a_clip_end_goes_to_the_consensus_where_its_two_fills_agree(wal
     # on the walk's own clip ends, with and without the rule
     gaps = punch_bone_gaps(rig, len(channels), (3, 120), ends=True)
     seen = interpolate_channels(channels, gaps)
-    unknown = rig.moved(gaps)
-    joints = rig.joints(truth)
-
-    def rmse(basis):
-        return 1000 * np.sqrt(np.mean(np.sum((rig.joints(basis) - joints) ** 2,
-                                             axis=2)[unknown]))
-
+    rmse = _joint_rmse(rig, truth, gaps)
     auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, return_choices=True)
     assert any(c.consensus == 1.0 and c.towards == "match + regress_kernel" for c in choices)
     monkeypatch.setattr(bonefill, "ENDS_SHARE", 0.0)
