@@ -470,15 +470,17 @@ class _Job:
 
     def refine(self, basis, gaps):
         """The local models' most likely joints near what the F-curves show: each joint a gap
-        leaves unknown is trusted to within ``GUESS_SPEED`` times its time to the nearest key
-        (:func:`~.models.soft_poses`); armature space, NaN where known."""
+        leaves unknown is trusted to within ``GUESS_SPEED`` times its time to the nearest end of
+        its gap (:func:`~.models.soft_poses`); armature space, NaN where known."""
         from .models import KnnSettings, soft_poses
 
         unknown = self.unknown(gaps)
         doubt = np.zeros(gaps.shape)
-        frames = np.arange(len(gaps))
         for b, a, e in gap_runs(gaps):
-            away = np.minimum(frames[a:e + 1] - a + 1, e + 1 - frames[a:e + 1]) / self.fps
+            # from the nearer end, at a clip end too: measured from the one key, the models
+            # pull its far frames further from the held key, and knn's clip ends lost (ASF/AMC
+            # tuning takes 1.07 of this per take-setting, docs/METHOD_NOTES.md, session 68)
+            away = stacking.from_keys(e - a + 1) / self.fps
             joints = self.moved_by(b)
             doubt[a:e + 1, joints] = np.maximum(doubt[a:e + 1, joints],
                                                 GUESS_SPEED * away[:, None])
@@ -765,9 +767,8 @@ class _Job:
                and LEARN_SECONDS * self.fps <= e - a + 1 < MID_LEARN_SECONDS * self.fps
                for b, a, e in runs]
         # gaps at a clip end, where the consensus fills may agree on what the held key lacks
-        last = len(gaps) - 1
-        ends = [rotations and not alone and ENDS_SHARE > 0 and (a == 0) != (e == last)
-                for _, a, e in runs]
+        ends = [rotations and not alone and ENDS_SHARE > 0
+                and stacking.keys_of(a, e, len(gaps)) != "both" for _, a, e in runs]
         fills = self.long_fills if any(longest) else self.stack_fills if stack else ()
         if any(unjudged):
             fills += tuple(f for f in self.consensus_fills if f not in fills)
@@ -1085,10 +1086,9 @@ class _Job:
         ``table_of(bone, first frame of the run)``, each frame's by its distance from the run's
         keys: at a clip end from its one key."""
         out = made["interp"].copy()
-        last = len(mask) - 1
         for b, a, e in gap_runs(mask):
-            key = "both" if (a == 0) == (e == last) else "after" if a == 0 else "before"
-            w = stacking.frame_weights(table_of(b, a), e - a + 1, self.fps, key)
+            w = stacking.frame_weights(table_of(b, a), e - a + 1, self.fps,
+                                       stacking.keys_of(a, e, len(mask)))
             out[a:e + 1, b] = _about(out[a:e + 1, b], [(made[name][a:e + 1, b], w[:, k:k + 1])
                                                        for k, name in enumerate(fills)])
         return out

@@ -24,14 +24,27 @@ DISTANCES = np.array([1, 2, 3, 5, 8, 12, 18, 27, 40, 60, 90]) / 120.0
 LENGTHS = np.array([0, 20, 45, 90, 180]) / 120.0
 
 
+def keys_of(first, last, frames):
+    """Where the keys of a gap over frames ``first``-``last`` of a take of ``frames`` frames
+    are: ``"both"`` ends, or only ``"after"`` it (a gap at the clip's start) or ``"before"`` it
+    (at its end). A gap over the whole take counts as ``"both"``."""
+    at_start, at_end = first == 0, last == frames - 1
+    return "both" if at_start == at_end else "after" if at_start else "before"
+
+
+def from_keys(length, key="both"):
+    """``(length,)`` int: each frame's distance in frames to the nearest key of a gap of
+    ``length`` frames whose keys are where ``key`` says (:func:`keys_of`)."""
+    t = np.arange(length)
+    return {"both": np.minimum(t + 1, length - t), "before": t + 1, "after": length - t}[key]
+
+
 def classes(length, fps, key="both"):
     """Per frame of a gap of ``length`` frames: its distance class (``(length,)`` int) and the
-    gap's length class (int). ``key``: where its keys are, ``"both"`` ends, or only ``"after"``
-    it (a gap at the clip's start) or ``"before"`` it (at its end): there a frame's distance is
-    to the one key, and the gap's length class that of a gap with keys at both ends and as far
+    gap's length class (int). ``key`` (:func:`keys_of`): at a clip end a frame's distance is to
+    the one key, and the gap's length class that of a gap with keys at both ends and as far
     from them (twice as long)."""
-    t = np.arange(length)
-    away = {"both": np.minimum(t + 1, length - t), "before": t + 1, "after": length - t}[key]
+    away = from_keys(length, key)
     near = np.clip(np.searchsorted(DISTANCES, away / fps + 1e-9, side="right") - 1, 0, None)
     span = length if key == "both" else 2 * length
     return near, int(np.searchsorted(LENGTHS, span / fps + 1e-9, side="right") - 1)
