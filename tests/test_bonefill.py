@@ -650,6 +650,8 @@ def test_stacking_weighs_each_fill_where_it_is_right():
     assert np.allclose(longer[:length // 2], w[:length // 2])
     # a gap at the clip's end has one key: its last frame is furthest from it, the first of a
     # gap at the clip's start likewise; half as long, it lies as far from its key as the copies
+    assert [stacking.keys_of(a, e, 100) for a, e in ((0, 9), (90, 99), (10, 20), (0, 99))] == [
+        "after", "before", "both", "both"]
     end = stacking.frame_weights(table, length // 2, fps, "before")
     start = stacking.frame_weights(table, length // 2, fps, "after")
     assert np.allclose(end, start[::-1]) and np.allclose(end, w[:length // 2])
