@@ -65,7 +65,9 @@ frames:
   the way on to ``learn``, too long to be judged by the copies there; in a take too short for
   copies, a long gap keeps ``interp`` where it and ``regress`` agree far more closely than
   either does with ``match``, and takes the mean of ``match`` and ``regress_kernel`` where
-  ``match`` would fill it unjudged (``UNJUDGED_CONSENSUS``);
+  ``match`` would fill it unjudged (``UNJUDGED_CONSENSUS``); a gap at a clip end (one key,
+  which Blender holds) goes on to the mean of ``match`` and ``regress_kernel`` where the two
+  agree on it (``ENDS_SHARE``: all the way);
   with a knowledge base of positions only, ``knn``, ``half`` (half-way from ``interp`` to
   ``knn``) and ``recall`` (subtrees carried onto the knowledge base's guess from the known
   joints alone: a KB that holds the motion) stand in; without a knowledge base (a rig no
@@ -724,7 +726,10 @@ class _Job:
         does not keep the interpolation goes :data:`CONSENSUS` of the way on from its fill to
         the mean of :data:`CONSENSUS_FILLS`, and in a take without copies every other gap of
         :data:`LONG_GAP` seconds or more that does not keep it :data:`UNJUDGED_CONSENSUS` of
-        the way (``match`` is unjudged there). Without a knowledge base the same from the take
+        the way (``match`` is unjudged there); a gap at a clip end where the two fills of
+        :data:`CONSENSUS_FILLS`, each filling the take's gaps alone, agree
+        (:meth:`_ends_agreed`) goes :data:`ENDS_SHARE` of the rest of the way on to their
+        mean. Without a knowledge base the same from the take
         alone: :data:`TAKE_ALONE_CANDIDATES`, the stacks without the knowledge base's fills,
         the consensus :data:`TAKE_ALONE_CONSENSUS`; a take without copies takes ``hermite`` on
         gaps shorter than :data:`LONG_GAP` and goes :data:`TAKE_ALONE_UNJUDGED` of the way to
