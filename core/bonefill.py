@@ -874,8 +874,7 @@ class _Job:
                                    learn_on=(gaps, learn_mask))
         # the pair at clip ends as each fills the take's gaps alone (neither is judged there)
         paired_ends = self.candidates(channels, location, gaps, ("interp", *self.consensus_fills),
-                                      seen) \
-            if any(ends) and len(self.consensus_fills) == 2 else {}
+                                      seen) if any(ends) else {}
         agreed = self._ends_agreed(paired_ends, runs, ends)
         wanted = learn_mask
         towards = self.consensus_fills
@@ -1017,18 +1016,14 @@ class _Job:
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), end) in enumerate(zip(runs, ends))
                  if end and self.moved_by(b).any()]
         out = np.zeros(len(runs), bool)
-        if not spans or not made:
+        if not spans:
             return out
         x, y = self.consensus_fills
         worlds = {key: self._spans(made[key], spans) for key in ("interp", x, y)}
         for k, (i, b, _, _) in enumerate(spans):
-            at = {key: world[k][:, self.moved_by(b)] for key, world in worlds.items()}
-
-            def apart(p, q):
-                return np.sqrt(np.mean(np.sum((at[p] - at[q]) ** 2, axis=-1)))
-
-            away = 0.5 * (apart(x, "interp") + apart(y, "interp"))
-            out[i] = away > 0 and apart(x, y) < CORROBORATED * away
+            apart, away = _apart({key: world[k][:, self.moved_by(b)]
+                                  for key, world in worlds.items()}, x, y)
+            out[i] = away > 0 and apart < CORROBORATED * away
         return out
 
     def _corroborated(self, made, runs, choice, learns=None):
@@ -1052,14 +1047,10 @@ class _Job:
         for k, (i, b, _, _) in enumerate(spans):
             joints = self.moved_by(b)
             at = {key: world[k][:, joints] for key, world in worlds.items()}
-
-            def apart(x, y):
-                return np.sqrt(np.mean(np.sum((at[x] - at[y]) ** 2, axis=-1)))
-
             some = fills + more if more and learns[i] else fills
-            ratios = {(x, y): apart(x, y) / max(0.5 * (apart(x, "interp") + apart(y, "interp")),
-                                                1e-12)
-                      for m, x in enumerate(some) for y in some[m + 1:]}
+            ratios = {(x, y): apart / max(away, 1e-12)
+                      for m, x in enumerate(some) for y in some[m + 1:]
+                      for apart, away in [_apart(at, x, y)]}
             pair = min(ratios, key=ratios.get)
             if ratios[pair] < CORROBORATED:
                 out[i] = pair
@@ -1212,6 +1203,15 @@ def halfway(start, end, gaps, share=0.5):
     part[:, :3, 3] = start[gaps][:, :3, 3] * (1 - share) + end[gaps][:, :3, 3] * share
     out[gaps] = part
     return out
+
+
+def _apart(at, x, y):
+    """How far fills ``x`` and ``y`` lie apart and their mean departure from ``interp`` (RMS
+    of the joint distances; ``at``: each fill's joints, (frames, joints, 3), by name)."""
+    def rms(p, q):
+        return np.sqrt(np.mean(np.sum((at[p] - at[q]) ** 2, axis=-1)))
+
+    return rms(x, y), 0.5 * (rms(x, "interp") + rms(y, "interp"))
 
 
 def _about(base, parts):
