@@ -315,7 +315,8 @@ def how_filled(choices, bone, first, last):
     agree, the share it went to the cubic where the take's copies favour it, and to ``learn``
     where the bone's own windows trust it; last, how far it then went on towards the consensus
     of a long gap: the knowledge base's motion and the take's own regression, or the
-    regression alone without a knowledge base, or towards ``learn`` on a gap of 0.4-0.6 s)
+    regression alone without a knowledge base, or towards ``learn`` on a gap of 0.4-0.6 s;
+    and the fill that took its place where it lay nearer the other fills than all before it)
     and the copies' estimate of its error as a share of the interpolation's (the largest where
     several, 0 where none judged it). No error in millimetres: an armature's copies foretell
     the share, not the level (docs/METHOD_NOTES.md, session 34)."""
@@ -336,6 +337,8 @@ def how_filled(choices, bone, first, last):
                  if c.learnt else "")
               + (f", then the mean of {c.towards}" if c.consensus == 1 else
                  f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
+              + (f", then {c.medoid} in its place, which the other fills bear out"
+                 if c.medoid else "")
               for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
     return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0

@@ -153,6 +153,12 @@ CONSENSUS_FILLS = ("match", "regress_kernel")
 #: out say what the key lacks (:meth:`_Job._ends_agreed`; chosen by leave-one-subject-out on
 #: non-test takes, docs/METHOD_NOTES.md, session 68)
 ENDS_SHARE = 1.0
+#: last, each gap with keys at both ends takes, of its fill and these (each filling the take's
+#: gaps alone), the one that lies nearest the others (the least summed RMS distance over the
+#: joints its bone moves): fills from different evidence fail on different gaps, and the one
+#: the others bear out is the one least likely to have failed (:meth:`_Job._medoid`; chosen on
+#: non-test takes, docs/METHOD_NOTES.md, session 69)
+MEDOID_FILLS = ("match", "regress", "learn")
 #: in a take with copies, a gap from :data:`LEARN_SECONDS` up to ``MID_LEARN_SECONDS`` with keys
 #: beyond its keys (too long for ``learn`` to be judged) goes this share of the way on from its
 #: fill to ``learn``, the bone's own interpolator: alone it carries the keys' motion too far at
@@ -297,7 +303,9 @@ class GapChoice:
     they agree on the gap ("": none); ``cubic``: how
     far the gap went towards the cubic (``hermite``) beside, where the take's copies favour it
     (:data:`CUBIC_TRUST`; 0: not at all); ``learnt``: how far it went towards ``learn``
-    beside, where the bone's own windows trust it (:data:`LEARN_TRUST`; 0: not at all)."""
+    beside, where the bone's own windows trust it (:data:`LEARN_TRUST`; 0: not at all);
+    ``medoid``: the fill of :data:`MEDOID_FILLS` that then took the gap's place, lying nearer
+    the other fills than all that went before ("": none did)."""
 
     bone: str
     first: int
@@ -310,6 +318,7 @@ class GapChoice:
     corroborated: str = ""
     cubic: float = 0.0
     learnt: float = 0.0
+    medoid: str = ""
 
 
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
@@ -402,12 +411,13 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     cubic = job.cubic or [0.0] * len(runs)
     learnt = job.learnt or [0.0] * len(runs)
     towards = job.towards or [()] * len(runs)
+    medoids = job.medoids or [""] * len(runs)
     return basis, [GapChoice(rig.names[b], a, e, name, float(share), float(estimate), further,
                              " + ".join(onto) if further else "", " + ".join(pair or ()),
-                             float(pulled), float(learn))
-                   for (b, a, e), (name, share), estimate, further, onto, pair, pulled, learn
-                   in zip(runs, choices, estimates, consensus, towards, corroborated, cubic,
-                          learnt)]
+                             float(pulled), float(learn), medoid)
+                   for (b, a, e), (name, share), estimate, further, onto, pair, pulled, learn,
+                   medoid in zip(runs, choices, estimates, consensus, towards, corroborated,
+                                 cubic, learnt, medoids)]
 
 
 class _Job:
@@ -426,7 +436,7 @@ class _Job:
         # auto's choice per gap, its estimate of it from the copies and how far the gap then
         # went on to the long-gap consensus (None: not auto)
         self.choices = self.estimates = self.consensus = self.corroborated = self.cubic = None
-        self.learnt = self.towards = None
+        self.learnt = self.towards = self.medoids = None
         # the fills auto stacks, and those its long gaps go on to: without a knowledge base,
         # the take's own
         self.stack_fills, self.long_fills = (
@@ -872,9 +882,18 @@ class _Job:
         elif any(mid):
             made = self.candidates(channels, location, learn_mask, with_learn, seen,
                                    learn_on=(gaps, learn_mask))
-        # the pair at clip ends as each fills the take's gaps alone (neither is judged there)
-        paired_ends = self.candidates(channels, location, gaps, ("interp", *self.consensus_fills),
-                                      seen) if any(ends) else {}
+        # the fills as each fills the take's gaps alone: the pair at clip ends (neither is
+        # judged there) and the medoid's voters on the gaps with two keys
+        both = [rotations and not alone and bool(MEDOID_FILLS) and not self.rig.roots[b]
+                and stacking.keys_of(a, e, len(gaps)) == "both" for b, a, e in runs]
+        alone_names = ((self.consensus_fills if any(ends) else ())
+                       + (MEDOID_FILLS if any(both) else ()))
+        # (those made for every gap already, as each fills them alone, are the same)
+        same = {name: made[name] for name in alone_names
+                if name in made and np.array_equal(wanted, gaps)
+                and (name != "learn" or np.array_equal(learn_mask, gaps))}
+        paired_ends = {**self.candidates(channels, location, gaps, ("interp", *(
+            name for name in alone_names if name not in same)), seen), **same} if alone_names else {}
         agreed = self._ends_agreed(paired_ends, runs, ends)
         wanted = learn_mask
         towards = self.consensus_fills
@@ -922,7 +941,7 @@ class _Job:
                if any(self.learnt) else "")
             + (f"; {sum(agreed)} gaps at a clip end {ENDS_SHARE:.0%} of the way on to "
                f"{' + '.join(self.consensus_fills)}, which agree there" if any(agreed) else ""))
-        if not wanted.any() and not agreed.any():
+        if not wanted.any() and not agreed.any() and not any(both):
             return seen
         out = seen.copy()
         for (b, a, e), (name, share), further, onto, pair, cubic, to_learn, end in zip(
@@ -947,7 +966,69 @@ class _Job:
                     target = halfway(target, source[key][rows, b:b + 1], span, 1 / k)
                 fill = halfway(fill, target, span, further)
             out[rows, b] = fill[:, 0]
+        self.medoids = self._medoid(out, paired_ends, runs, both)
+        for (b, a, e), name in zip(runs, self.medoids):
+            if name:
+                out[a:e + 1, b] = paired_ends[name][a:e + 1, b]
+        if any(self.medoids):
+            self.report(f"auto: {sum(map(bool, self.medoids))} of {sum(both)} gaps with two keys "
+                        f"take the one of {' / '.join(MEDOID_FILLS)} that lies nearer the other "
+                        "fills than their own")
         return out
+
+    def _medoid(self, filled, alone, runs, both):
+        """Per gap, the fill of :data:`MEDOID_FILLS` (in ``alone``) to take instead of
+        ``filled``'s, where it has the least summed RMS distance to the others of the fills and
+        ``filled`` ("": ``filled`` has). Gaps of bones one above the other that overlap in time
+        are decided together (:meth:`_chains`), over the joints they move and the frames they
+        span: a chain's rotations from different fills do not fit together. Only groups of
+        gaps that are all ``both``."""
+        out = [""] * len(runs)
+        groups = [group for group in self._chains(runs) if all(both[i] for i in group)]
+        joints = [np.logical_or.reduce([self.moved_by(runs[i][0]) for i in group])
+                  for group in groups]
+        groups, joints = ([g for g, j in zip(groups, joints) if j.any()],
+                          [j for j in joints if j.any()])
+        if not groups:
+            return out
+        spans = [(None, None, min(runs[i][1] for i in group),
+                  max(runs[i][2] for i in group) - min(runs[i][1] for i in group) + 1)
+                 for group in groups]
+        keys = ("",) + MEDOID_FILLS
+        worlds = {key: self._spans(alone[key] if key else filled, spans) for key in keys}
+        for k, (group, moved) in enumerate(zip(groups, joints)):
+            at = {key: world[k][:, moved] for key, world in worlds.items()}
+            summed = {x: sum(np.sqrt(np.mean(np.sum((at[x] - at[y]) ** 2, axis=-1)))
+                             for y in keys) for x in keys}
+            for i in group:
+                out[i] = min(keys, key=summed.get)
+        return out
+
+    def _chains(self, runs):
+        """The gaps (``runs``' indices) in groups: two gaps whose frames overlap, of bones one
+        above the other, are in one group."""
+        above = []  # each bone's ancestors
+        for b in range(len(self.rig.parents)):
+            chain, p = set(), self.rig.parents[b]
+            while p >= 0:
+                chain.add(p)
+                p = self.rig.parents[p]
+            above.append(chain)
+        group = list(range(len(runs)))
+
+        def top(i):
+            while group[i] != i:
+                i = group[i]
+            return i
+
+        for i, (b, a, e) in enumerate(runs):
+            for j, (c, a2, e2) in enumerate(runs[:i]):
+                if a <= e2 and a2 <= e and (c in above[b] or b in above[c]):
+                    group[top(i)] = top(j)
+        out = {}
+        for i in range(len(runs)):
+            out.setdefault(top(i), []).append(i)
+        return list(out.values())
 
     def _outvoted(self, channels, location, wanted, seen, made, runs, choice):
         """``choice`` in a take without copies, where ``match`` fills every gap of

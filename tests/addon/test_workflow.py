@@ -107,8 +107,8 @@ def test_a_marker_gap_names_every_estimate_blended_into_it(extension):
 def test_an_armature_gap_names_the_fills_it_went_to(extension):
     """The gap list's words for a bone's gaps: a share of a fill, the rest to an agreeing pair
     (less of the way where ``learn`` is one of it) and to the cubic the take's copies favour, to
-    ``learn`` where the bone's windows trust it, then on to ``learn`` on a gap of 0.4-0.6 s; the
-    interpolation kept where nothing moved it."""
+    ``learn`` where the bone's windows trust it, then on to ``learn`` on a gap of 0.4-0.6 s, then
+    the fill the others bear out in its place; the interpolation kept where nothing moved it."""
     from mocap_gapfill.core.bonefill import GapChoice
 
     _, _, gaps, _ = modules()
@@ -119,7 +119,8 @@ def test_an_armature_gap_names_the_fills_it_went_to(extension):
                GapChoice("lShldr", 100, 114, "learn", 0.4, 0.5, learnt=0.15),
                GapChoice("lShldr", 130, 189, "stack", 0.5, 0.7, consensus=0.2, towards="learn",
                          corroborated="hermite + match"),
-               GapChoice("lShldr", 200, 214, "interp", 0.0)]
+               GapChoice("lShldr", 200, 214, "interp", 0.0),
+               GapChoice("lShldr", 300, 359, "match", 1.0, 0.4, medoid="regress")]
     assert gaps.how_filled(choices, "lShldr", 10, 24)[:2] == (
         "mix (50% of the way), the rest 50% to hermite + regress, which agree, 15% to the "
         "cubic, which the take favours", 0.6)
@@ -128,6 +129,8 @@ def test_an_armature_gap_names_the_fills_it_went_to(extension):
     assert gaps.how_filled(choices, "lShldr", 70, 84)[0] == (
         "interp, the rest 42% to hermite + learn, which agree")
     assert gaps.how_filled(choices, "lShldr", 200, 214)[0] == "interp"
+    assert gaps.how_filled(choices, "lShldr", 300, 359)[0] == (
+        "match, then regress in its place, which the other fills bear out")
     assert gaps.how_filled(choices, "lShldr", 100, 114)[0] == (
         "learn (40% of the way), 15% to learn, which the bone's windows trust")
     assert gaps.how_filled(choices, "lShldr", 130, 189)[0] == (
