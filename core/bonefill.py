@@ -157,7 +157,7 @@ ENDS_SHARE = 1.0
 #: gaps alone), the one that lies nearest the others (the least summed RMS distance over the
 #: joints its bone moves): fills from different evidence fail on different gaps, and the one
 #: the others bear out is the one least likely to have failed (:meth:`_Job._medoid`; chosen on
-#: non-test takes, docs/METHOD_NOTES.md, session 69)
+#: non-test takes, docs/METHOD_NOTES.md, session 69), in a take with copies of its gaps
 MEDOID_FILLS = ("match", "regress", "learn")
 #: in a take with copies, a gap from :data:`LEARN_SECONDS` up to ``MID_LEARN_SECONDS`` with keys
 #: beyond its keys (too long for ``learn`` to be judged) goes this share of the way on from its
@@ -884,8 +884,10 @@ class _Job:
                                    learn_on=(gaps, learn_mask))
         # the fills as each fills the take's gaps alone: the pair at clip ends (neither is
         # judged there) and the medoid's voters on the gaps with two keys
-        both = [rotations and not alone and bool(MEDOID_FILLS) and not self.rig.roots[b]
-                and stacking.keys_of(a, e, len(gaps)) == "both" for b, a, e in runs]
+        # (in a take with copies: where none fit, session 31's outvoting holds)
+        both = [rotations and not alone and bool(MEDOID_FILLS) and bool(copies)
+                and not self.rig.roots[b] and stacking.keys_of(a, e, len(gaps)) == "both"
+                for b, a, e in runs]
         alone_names = ((self.consensus_fills if any(ends) else ())
                        + (MEDOID_FILLS if any(both) else ()))
         # (those made for every gap already, as each fills them alone, are the same)
