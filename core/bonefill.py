@@ -891,8 +891,8 @@ class _Job:
         alone_names = ((self.consensus_fills if any(ends) else ())
                        + (MEDOID_FILLS if any(both) else ()))
         # (those made for every gap already, as each fills them alone, are the same)
-        same = {name: made[name] for name in alone_names
-                if name in made and np.array_equal(wanted, gaps)
+        whole = np.array_equal(wanted, gaps)
+        same = {name: made[name] for name in alone_names if whole and name in made
                 and (name != "learn" or np.array_equal(learn_mask, gaps))}
         paired_ends = {**self.candidates(channels, location, gaps, ("interp", *(
             name for name in alone_names if name not in same)), seen), **same} if alone_names else {}
@@ -986,36 +986,27 @@ class _Job:
         span: a chain's rotations from different fills do not fit together. Only groups of
         gaps that are all ``both``."""
         out = [""] * len(runs)
-        groups = [group for group in self._chains(runs) if all(both[i] for i in group)]
-        joints = [np.logical_or.reduce([self.moved_by(runs[i][0]) for i in group])
-                  for group in groups]
-        groups, joints = ([g for g, j in zip(groups, joints) if j.any()],
-                          [j for j in joints if j.any()])
+        groups = [(group, moved) for group in self._chains(runs) if all(both[i] for i in group)
+                  for moved in [np.logical_or.reduce([self.moved_by(runs[i][0]) for i in group])]
+                  if moved.any()]
         if not groups:
             return out
-        spans = [(None, None, min(runs[i][1] for i in group),
-                  max(runs[i][2] for i in group) - min(runs[i][1] for i in group) + 1)
-                 for group in groups]
+        spans = []
+        for group, _ in groups:
+            first, last = min(runs[i][1] for i in group), max(runs[i][2] for i in group)
+            spans.append((None, None, first, last - first + 1))
         keys = ("",) + MEDOID_FILLS
         worlds = {key: self._spans(alone[key] if key else filled, spans) for key in keys}
-        for k, (group, moved) in enumerate(zip(groups, joints)):
+        for k, (group, moved) in enumerate(groups):
             at = {key: world[k][:, moved] for key, world in worlds.items()}
-            summed = {x: sum(np.sqrt(np.mean(np.sum((at[x] - at[y]) ** 2, axis=-1)))
-                             for y in keys) for x in keys}
+            nearest = min(keys, key=lambda x: sum(_rms_apart(at, x, y) for y in keys))
             for i in group:
-                out[i] = min(keys, key=summed.get)
+                out[i] = nearest
         return out
 
     def _chains(self, runs):
         """The gaps (``runs``' indices) in groups: two gaps whose frames overlap, of bones one
-        above the other, are in one group."""
-        above = []  # each bone's ancestors
-        for b in range(len(self.rig.parents)):
-            chain, p = set(), self.rig.parents[b]
-            while p >= 0:
-                chain.add(p)
-                p = self.rig.parents[p]
-            above.append(chain)
+        above the other (:meth:`~.rig.Rig.placed_by`), are in one group."""
         group = list(range(len(runs)))
 
         def top(i):
@@ -1025,7 +1016,7 @@ class _Job:
 
         for i, (b, a, e) in enumerate(runs):
             for j, (c, a2, e2) in enumerate(runs[:i]):
-                if a <= e2 and a2 <= e and (c in above[b] or b in above[c]):
+                if a <= e2 and a2 <= e and (self.below[c, b] or self.below[b, c]):
                     group[top(i)] = top(j)
         out = {}
         for i in range(len(runs)):
@@ -1288,13 +1279,16 @@ def halfway(start, end, gaps, share=0.5):
     return out
 
 
-def _apart(at, x, y):
-    """How far fills ``x`` and ``y`` lie apart and their mean departure from ``interp`` (RMS
-    of the joint distances; ``at``: each fill's joints, (frames, joints, 3), by name)."""
-    def rms(p, q):
-        return np.sqrt(np.mean(np.sum((at[p] - at[q]) ** 2, axis=-1)))
+def _rms_apart(at, x, y):
+    """How far fills ``x`` and ``y`` lie apart: the RMS of their joint distances (``at``: each
+    fill's joints, (frames, joints, 3), by name)."""
+    return np.sqrt(np.mean(np.sum((at[x] - at[y]) ** 2, axis=-1)))
 
-    return rms(x, y), 0.5 * (rms(x, "interp") + rms(y, "interp"))
+
+def _apart(at, x, y):
+    """How far fills ``x`` and ``y`` lie apart and their mean departure from ``interp``
+    (:func:`_rms_apart`)."""
+    return _rms_apart(at, x, y), 0.5 * (_rms_apart(at, x, "interp") + _rms_apart(at, y, "interp"))
 
 
 def _about(base, parts):
