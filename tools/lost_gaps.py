@@ -14,7 +14,9 @@ copies.
                                                    # without a knowledge base; FILLS=hermite,
                                                    # regress,match: those fills' departure,
                                                    # distance to auto's, error and distances
-                                                   # from each other too; LENGTHS=15,30:
+                                                   # from each other too, any of bonefill's
+                                                   # CANDIDATES (regress_kernel, mix, ...)
+                                                   # as auto makes it; LENGTHS=15,30:
                                                    # only those gap lengths; FURTHER=1: the
                                                    # 19 further non-test Daz takes instead)
     python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, sessions 38, 52
@@ -29,7 +31,8 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from mocap_gapfill.core.bonefill import AUTO_COPIES, COPY_MARGIN, fill_bones, gap_copies
+from mocap_gapfill.core.bonefill import (AUTO_COPIES, BONE_METHODS, COPY_MARGIN, _Job,
+                                         fill_bones, gap_copies)
 from mocap_gapfill.core.evaluate import (BONE_SETTINGS, kb_without, punch_bone_gaps,
                                          subject_of)
 from mocap_gapfill.core.io import read_rig_take
@@ -44,6 +47,18 @@ DAZ_TUNING = "01_08 02_05 03_02 05_10 06_03 07_05 08_02 09_05 10_03 11_01 12_03 
 DAZ_FURTHER = ("01_14 02_04 02_07 03_01 05_19 05_04 06_05 06_15 07_06 07_03 08_09 08_03 09_06 "
                "09_01 10_05 10_02 12_01 13_32 13_42").split()
 STEPS = np.linspace(0.0, 1.0, 21)
+
+
+def _fill_of(rig, channels, location, gaps, fps, kb, name):
+    """The take filled by ``name``: a method of ``fill_bones``, or one of the candidates only
+    ``auto`` makes (``regress_kernel``, ``mix``, ...), made as ``auto`` makes it (each filling
+    the take's gaps alone)."""
+    if name in BONE_METHODS:
+        return fill_bones(rig, channels, location, gaps, fps, kb=kb, method=name)
+    job = _Job(rig, fps, kb, rig.roots, np.eye(4), None, lambda fraction, message: None, None,
+               lambda message: None)
+    return job.candidates(channels, location, gaps, (name,),
+                          basis_matrices(rig, channels, location))[name]
 
 
 def run(out):
@@ -77,8 +92,7 @@ def run(out):
                     one = basis_matrices(rig, seen[a:e + 1], location[a:e + 1])
                     one[:, b] = filled[a:e + 1, b]
                     alone.append(rig.joints(one))
-                others = {name: rig.joints(fill_bones(rig, seen, location, gaps, fps, kb=kb,
-                                                      method=name))
+                others = {name: rig.joints(_fill_of(rig, seen, location, gaps, fps, kb, name))
                           for name in os.environ.get("FILLS", "").split(",") if name}
                 filled = rig.joints(filled)
                 copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
