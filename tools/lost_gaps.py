@@ -31,14 +31,14 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from mocap_gapfill.core.bonefill import (AUTO_COPIES, BONE_METHODS, COPY_MARGIN, _Job,
-                                         fill_bones, gap_copies)
+from mocap_gapfill.core.bonefill import (AUTO_COPIES, BONE_METHODS, COPY_MARGIN, fill_bones,
+                                         gap_copies)
 from mocap_gapfill.core.evaluate import (BONE_SETTINGS, kb_without, punch_bone_gaps,
                                          subject_of)
 from mocap_gapfill.core.io import read_rig_take
 from mocap_gapfill.core.motion import gap_runs
 from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
-from tune_bones import AMC, AMC_TUNING, DAZ, armature_kb
+from tune_bones import AMC, AMC_TUNING, DAZ, armature_kb, quiet_job
 
 DAZ_TUNING = "01_08 02_05 03_02 05_10 06_03 07_05 08_02 09_05 10_03 11_01 12_03 13_10".split()
 #: up to two more non-test Daz takes per subject (drawn with seed 58; 03 and 12 have one left,
@@ -47,18 +47,6 @@ DAZ_TUNING = "01_08 02_05 03_02 05_10 06_03 07_05 08_02 09_05 10_03 11_01 12_03 
 DAZ_FURTHER = ("01_14 02_04 02_07 03_01 05_19 05_04 06_05 06_15 07_06 07_03 08_09 08_03 09_06 "
                "09_01 10_05 10_02 12_01 13_32 13_42").split()
 STEPS = np.linspace(0.0, 1.0, 21)
-
-
-def _fill_of(rig, channels, location, gaps, fps, kb, name):
-    """The take filled by ``name``: a method of ``fill_bones``, or one of the candidates only
-    ``auto`` makes (``regress_kernel``, ``mix``, ...), made as ``auto`` makes it (each filling
-    the take's gaps alone)."""
-    if name in BONE_METHODS:
-        return fill_bones(rig, channels, location, gaps, fps, kb=kb, method=name)
-    job = _Job(rig, fps, kb, rig.roots, np.eye(4), None, lambda fraction, message: None, None,
-               lambda message: None)
-    return job.candidates(channels, location, gaps, (name,),
-                          basis_matrices(rig, channels, location))[name]
 
 
 def run(out):
@@ -76,6 +64,7 @@ def run(out):
             kb = None if full is None else kb_without(full, subject_of(path))
             truth = rig.joints(basis_matrices(rig, channels, location))
             below = rig.placed_by()
+            job = quiet_job(rig, fps, kb)  # FILLS' candidates only auto makes
             for n, l in BONE_SETTINGS:
                 if lengths and l not in lengths:
                     continue
@@ -84,7 +73,8 @@ def run(out):
                 if not gaps.any():
                     continue
                 seen = interpolate_channels(channels, gaps)
-                shown = rig.joints(basis_matrices(rig, seen, location))
+                shown_basis = basis_matrices(rig, seen, location)
+                shown = rig.joints(shown_basis)
                 filled, choices = fill_bones(rig, seen, location, gaps, fps, kb=kb,
                                              return_choices=True)
                 alone = []  # auto's fill of each gap's bone alone, the others interpolated
@@ -92,8 +82,14 @@ def run(out):
                     one = basis_matrices(rig, seen[a:e + 1], location[a:e + 1])
                     one[:, b] = filled[a:e + 1, b]
                     alone.append(rig.joints(one))
-                others = {name: rig.joints(_fill_of(rig, seen, location, gaps, fps, kb, name))
-                          for name in os.environ.get("FILLS", "").split(",") if name}
+                # a method of fill_bones, or a candidate only auto makes (regress_kernel,
+                # mix, ...) as it makes it, each filling the take's gaps alone (one job: the
+                # knowledge base's features once)
+                others = {name: rig.joints(
+                    fill_bones(rig, seen, location, gaps, fps, kb=kb, method=name)
+                    if name in BONE_METHODS else
+                    job.candidates(seen, location, gaps, (name,), shown_basis)[name])
+                    for name in os.environ.get("FILLS", "").split(",") if name}
                 filled = rig.joints(filled)
                 copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
                 probe = np.zeros_like(gaps)

@@ -48,6 +48,13 @@ AMC_TUNING = ["07/07_05", "09/09_06", "_unverified/charleston/charleston1",
 SHARES = (0.25, 0.5, 0.75, 1.0)
 
 
+def quiet_job(rig, fps, kb):
+    """A fill job as ``fill_bones`` makes one, that reports nothing: for the candidates only
+    ``auto`` makes (``_Job.candidates``)."""
+    return _Job(rig, fps, kb, rig.roots, np.eye(4), None, lambda fraction, message: None, None,
+                lambda message: None)
+
+
 def armature_kb(amc):
     """The knowledge base the armature tuning tools fill from: every CMU ASF/AMC take
     (``amc``) or every Daz-friendly take at 60 poses a second, the test takes out."""
@@ -80,8 +87,7 @@ def main(out, names=CANDIDATES):
             label = f"n={n},l={l}"
             gaps = punch_bone_gaps(rig, len(channels), (n, l))
             seen = interpolate_channels(channels, gaps)
-            job = _Job(rig, fps, kb, rig.roots, np.eye(4), None, lambda f, m: None, None,
-                       lambda m: None)
+            job = quiet_job(rig, fps, kb)
             copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
             probe = np.zeros_like(gaps)
             for _, b, start, length in copies:
