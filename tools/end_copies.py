@@ -27,7 +27,8 @@ from collections import defaultdict
 import numpy as np
 
 from mocap_gapfill.core.bonefill import fill_bones, halfway
-from mocap_gapfill.core.evaluate import BONE_SETTINGS, kb_without, punch_bone_gaps, subject_of
+from mocap_gapfill.core.evaluate import (BONE_SETTINGS, bone_errors, kb_without, punch_bone_gaps,
+                                         subject_of)
 from mocap_gapfill.core.io import read_rig_take
 from mocap_gapfill.core.motion import gap_runs
 from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
@@ -52,13 +53,13 @@ def fills_of(rig, channels, location, gaps, fps, kb):
 
 def gap_errors(rig, fills, truth, gaps):
     """Per gap (:func:`gap_runs` order), each fill's RMS joint error (mm) over the joints its
-    bone moves; None for a bone that moves none."""
+    bone moves (:func:`~mocap_gapfill.core.evaluate.bone_errors`, ``truth`` basis matrices);
+    None for a bone that moves none."""
+    per_fill = {name: bone_errors(rig, basis, truth, gaps)["gaps_mm"]
+                for name, basis in fills.items()}
     below = rig.placed_by()
-    joints = {name: rig.joints(basis) for name, basis in fills.items()}
-    return [{name: float(1000 * np.sqrt(np.mean(np.sum(
-        (j[a:e + 1, below[b]] - truth[a:e + 1, below[b]]) ** 2, axis=-1))))
-        for name, j in joints.items()} if below[b].any() else None
-        for b, a, e in gap_runs(gaps)]
+    return [{name: errors[i] for name, errors in per_fill.items()} if below[b].any() else None
+            for i, (b, _, _) in enumerate(gap_runs(gaps))]
 
 
 def run(out):
@@ -72,7 +73,8 @@ def run(out):
             path = AMC / f"{take}.amc" if amc else DAZ / take[:2] / f"{take}.bvh.gz"
             rig, channels, location, fps = read_rig_take(path, skip_frames=0 if amc else 6)
             kb = kb_without(full, subject_of(path))
-            truth = rig.joints(basis_matrices(rig, channels, location))
+            truth = basis_matrices(rig, channels, location)
+            below = rig.placed_by()
             frames = len(channels)
             for n, l in BONE_SETTINGS:
                 gaps = punch_bone_gaps(rig, frames, (n, l), ends=True)
@@ -107,7 +109,7 @@ def run(out):
                     sink.write(json.dumps({
                         "take": path.name, "subject": subject_of(path), "setting": f"n={n},l={l}",
                         "bone": rig.names[b], "start": bool(a == 0),
-                        "weight": int((e - a + 1) * rig.placed_by()[b].sum()),
+                        "weight": int((e - a + 1) * below[b].sum()),
                         "real": err, "copies": own}) + "\n")
                 print(take, n, l, flush=True)
 
