@@ -22,7 +22,7 @@ SWEEPS = 20
 
 
 def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None,
-                   sweeps=SWEEPS, local=0.0):
+                   sweeps=SWEEPS, local=0.0, seen=1.0):
     """``positions`` with its ``missing`` samples moved so that the points of each pair of
     ``pairs`` lie ``lengths`` apart, as far as each pair's ``spreads`` lets it.
 
@@ -45,6 +45,9 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None
         At each frame where it moves, a pair aims this share of the way from its length to its
         own distance there, interpolated linearly from the frames either side where both its
         ends are seen (held beyond the first and last such frame): 0 the length alone.
+    seen : float
+        At a frame where one of its ends is seen (not ``missing``), a pair's variance from
+        ``spreads`` counts this many times over (1: as it is).
 
     Returns
     -------
@@ -57,6 +60,9 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None
     >>> keep_distances(pos, np.array([[False, True]]), np.ones((1, 2)), np.array([[0, 1]]),
     ...                np.array([1.0]), spreads=np.array([1.0]))[0, 1].round(6).tolist()
     [1.5, 0.0, 0.0]
+    >>> keep_distances(pos, np.array([[False, True]]), np.ones((1, 2)), np.array([[0, 1]]),
+    ...                np.array([1.0]), spreads=np.array([1.0]), seen=3.0)[0, 1].round(6).tolist()
+    [1.75, 0.0, 0.0]
     """
     out = np.array(positions, dtype=np.float64)
     filled = np.isfinite(out[..., 0])
@@ -71,8 +77,11 @@ def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None
             if local:  # part of the way to the pair's own distance about the gap
                 own = _own_distance(out, missing, a, b, frames, length)
                 length = length + local * (own - length)[:, None]
+            one_seen = ~(missing[frames, a] & missing[frames, b])
             steps.append((a, b, length, frames, share[frames, a][:, None],
-                          share[frames, b][:, None], alpha, np.zeros((frames.size, 1))))
+                          share[frames, b][:, None],
+                          (alpha * np.where(one_seen, seen, 1.0))[:, None],
+                          np.zeros((frames.size, 1))))
     for _ in range(sweeps):
         for a, b, length, frames, share_a, share_b, alpha, pull in steps:
             apart = out[frames, a] - out[frames, b]

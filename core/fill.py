@@ -40,6 +40,10 @@ AUTO_KEPT_SPREAD = 0.005
 #: its own distance about the gap (interpolated from where both ends are seen): the distance
 #: drifts as the body turns its joints (docs/METHOD_NOTES.md, session 67)
 AUTO_KEPT_LOCAL = 0.5
+#: ... and, at a frame where one of its ends is seen, counts as this many times its variance: a
+#: marker alone in a gap is placed among its seen partners already, and the copies' error a
+#: gap expects is no closer than that to its own (docs/METHOD_NOTES.md, session 72)
+AUTO_KEPT_SEEN = 2.0
 
 #: donors of ``auto``'s rigid-body estimate
 AUTO_DONORS = 3
@@ -640,7 +644,8 @@ def _with_distances_kept(motion, out, uncertainty, hold, report, partners):
     uncertainty = np.where(missing & ~hold, np.maximum(np.where(known, uncertainty, fallback),
                                                        baselines.RIGID_TIE ** 2), 0.0)
     kept = keep_distances(out, missing, uncertainty, pairs, lengths,
-                          spreads if markers else None, local=AUTO_KEPT_LOCAL if markers else 0.0)
+                          spreads if markers else None, local=AUTO_KEPT_LOCAL if markers else 0.0,
+                          seen=AUTO_KEPT_SEEN if markers else 1.0)
     moved = np.linalg.norm(kept - out, axis=2)[missing]
     moved = moved[np.isfinite(moved)]
     if moved.size:
