@@ -618,8 +618,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
 def _with_distances_kept(motion, out, uncertainty, hold, report, partners):
     """The fill ``out`` with the take's missing samples moved onto the distances it keeps
     exactly (a skeleton) or towards those it keeps within :data:`AUTO_KEPT_SPREAD` (a marker
-    set, each pair as far as its spread lets it and aiming :data:`AUTO_KEPT_LOCAL` of the way
-    from its mean distance to its own about the gap; :func:`~.baselines.steady_pairs`,
+    set, each pair as far as its spread lets it, :data:`AUTO_KEPT_SEEN` times as loosely where
+    one of its ends is seen, and aiming :data:`AUTO_KEPT_LOCAL` of the way from its mean
+    distance to its own about the gap; :func:`~.baselines.steady_pairs`,
     :func:`~.distances.keep_distances`), each by its expected squared error ``uncertainty``
     (where unknown: the largest known, else 1 m^2; at least :data:`~.baselines.RIGID_TIE`
     squared); the samples of ``hold`` (a marker's short gaps) keep their place. The gaps'
