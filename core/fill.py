@@ -41,8 +41,8 @@ AUTO_KEPT_SPREAD = 0.005
 #: drifts as the body turns its joints (docs/METHOD_NOTES.md, session 67)
 AUTO_KEPT_LOCAL = 0.5
 #: ... and, at a frame where one of its ends is seen, counts as this many times its variance: a
-#: marker alone in a gap is placed among its seen partners already, and the copies' error a
-#: gap expects is no closer than that to its own (docs/METHOD_NOTES.md, session 72)
+#: marker alone in a gap is placed among its seen partners already, and the error its gap
+#: expects (from copies) is right on the mean, not per gap (docs/METHOD_NOTES.md, session 72)
 AUTO_KEPT_SEEN = 2.0
 
 #: donors of ``auto``'s rigid-body estimate
