@@ -71,7 +71,8 @@ AUTO_SPREAD_CAP = 2.0
 #: fit; on marker sets the windows never refilled the copies better, and cost time); and the
 #: take's own regression of the point on the points seen through the gap
 #: (:func:`~.regression.regress_points`), weighted by its errors on the copies (on shorter gaps
-#: and on marker sets it misled the copies: docs/METHOD_NOTES.md, "Session 22")
+#: and on marker sets it misled the copies: docs/METHOD_NOTES.md, "Session 22"); without a
+#: knowledge base the regression (and the pattern below) alone stand in for it (session 73)
 AUTO_MATCH_SECONDS = 1.0
 #: on those points a partner's pattern (:func:`~.baselines.fill_pattern`) joins the knowledge
 #: base's estimate too where it refills the copies better still, its error on them raised to at
@@ -360,7 +361,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     the windows only where they refill them better, and then the take's own regression of the
     point on the rest of the body (:func:`~.regression.regress_points`), by its error on the
     copies, and a partner's pattern where it refills them better still
-    (:data:`AUTO_PATTERN_FLOOR`). A spline through the take joins longer gaps where it refilled
+    (:data:`AUTO_PATTERN_FLOOR`); without a knowledge base those two alone take its place. A
+    spline through the take joins longer gaps where it refilled
     the point's copies better than the fill is expected to do on the gap
     (:func:`_with_spline_joined`: most of the body gone at once leaves far partners and models
     that see little), and they lean towards it next to their ends (:func:`_with_spline_ends`);
@@ -397,7 +399,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                             enough=AUTO_PROBE_FRAMES)
     with np.errstate(invalid="ignore"):
         long = (probe.any(axis=0) & (_mean_run(missing) >= AUTO_MATCH_SECONDS * motion.fps)
-                & (motion.parents is not None) & (kb is not None))
+                & (motion.parents is not None))
 
     partners = {}  # the donors' statistics on this take, computed once
     donors = {}  # the pattern's, on the take with its copies hidden
@@ -439,7 +441,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
                                          (placed(hidden, probe), placed(motion)) if markers
                                          else (None, None),
                                          fill_match(hidden, kb, long, stopped).positions
-                                         if long.any() else None,
+                                         if long.any() and kb is not None else None,
                                          regress_points(hidden.positions, motion.names,
                                                         probe & long[None])
                                          if long.any() else None,
@@ -490,8 +492,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         e_kb = e_knn  # of the knowledge base's estimate: the models, with the windows on long gaps
         if long.any():
             # the windows join where they refilled the point's copies better than the models
-            windows, e_kb = _joined(e_knn, np.where(long, on_copies_of(matched), np.inf),
-                                    AUTO_JOIN_RAMP)
+            if kb is not None:
+                windows, e_kb = _joined(e_knn, np.where(long, on_copies_of(matched), np.inf),
+                                        AUTO_JOIN_RAMP)
             # the take's own regression joins the knowledge base's estimate by its error
             own, e_kb = _joined(e_kb, np.where(long, on_copies_of(regressed), np.inf))
             # the partner's pattern where it refilled them better still, trusted no closer than
@@ -506,7 +509,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         # points their rigid partners carry alone
         first = seen & (e_rigid < e_knn) & (e_rigid < alone ** 2 * probe.sum(axis=0))
         weight[first] = 0.0
-    weight[[motion.names.index(n) for n in lacking]] = 0.0  # the knowledge base has none of them
+    # the knowledge base has none of them: rigid partners carry them, or on long gaps the take's
+    # own regression and a partner's pattern stand in for it (without a knowledge base too)
+    weight[[p for p in map(motion.names.index, lacking) if not own[p] > 0]] = 0.0
     ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
     # the knowledge base sees those as observed (they are never another point's donors: an
     # estimate carried on would add its error to the next)
@@ -766,9 +771,12 @@ def _mix_in(knn, other, share):
     """An estimate (the models' fill; the rigid estimate) with another mixed in at each point's
     ``share`` where the other has a value (the windows, :func:`~.matching.fill_match`; the
     take's own regression, :func:`~.regression.regress_points`; a marker's place among its
-    partners, :func:`~.regression.regress_in_frame`)."""
+    partners, :func:`~.regression.regress_in_frame`); ``other`` None: none. At a share of 1
+    the other alone, where ``knn`` has none (no knowledge base)."""
+    if other is None:
+        return knn
     part = np.where(np.isnan(other[..., :1]), 0.0, share[None, :, None])
-    return knn * (1 - part) + np.nan_to_num(other) * part
+    return np.where(part == 1, 0.0, knn) * (1 - part) + np.nan_to_num(other) * part
 
 
 def _blend(kb, rigid, weight):
