@@ -1376,17 +1376,24 @@ def test_auto_without_a_knowledge_base_regresses_a_joint_gone_for_seconds_on_the
     written 26.1 mm, before 68.7, `rigid` 70.0 (non-test takes at l >= 1 s, new / before:
     ASF/AMC 0.63, Daz 0.71; docs/METHOD_NOTES.md, session 73)."""
     take = complete_take(read_motion(data_dir / "cmu/asfamc/07/07_05.amc"), None, 60.0)
-    miss = punch_gaps(take.n_frames, take.n_points, "joints", (6, 120),
-                      np.random.default_rng([0, *b"m=6,l=120"]), take.names)
+    alone, rigid, messages, _ = _alone_and_rigid(take, "joints", (6, 120), b"m=6,l=120")
+    assert alone < 0.5 * rigid
+    assert any(m.startswith("auto: the take's own regression on the rest of the body joins")
+               for m in messages)
+
+
+def _alone_and_rigid(take, protocol, setting, label):
+    """``auto`` without a knowledge base and ``rigid`` on the protocol's gaps in ``take``: their
+    RMSE over the missing samples (mm), ``auto``'s report and the gapped take."""
+    miss = punch_gaps(take.n_frames, take.n_points, protocol, setting,
+                      np.random.default_rng([0, *label]), take.names)
     query = with_gaps(take, miss)
     messages = []
     alone = fill(query, "auto", report=messages.append)
-    rigid = fill(query, "rigid")
-    print(rmse_mm(alone, take, miss), rmse_mm(rigid, take, miss))
     assert not alone.missing.any()
-    assert rmse_mm(alone, take, miss) < 0.5 * rmse_mm(rigid, take, miss)
-    assert any(m.startswith("auto: the take's own regression on the rest of the body joins")
-               for m in messages)
+    errors = rmse_mm(alone, take, miss), rmse_mm(fill(query, "rigid"), take, miss)
+    print(*errors)
+    return *errors, messages, query
 
 
 def test_auto_without_a_knowledge_base_fills_from_the_take_alone(data_dir):
@@ -1395,15 +1402,8 @@ def test_auto_without_a_knowledge_base_fills_from_the_take_alone(data_dir):
     markers gone per 60 frames (the `markers` protocol): when written 9.7 mm, `rigid` (Vicon's
     rigid-body fill) 19.9."""
     take = read_motion(data_dir / "cmu/c3d/02_05.c3d")
-    miss = punch_gaps(take.n_frames, take.n_points, "markers", 0.2,
-                      np.random.default_rng([0, *b"rate=0.2"]), take.names)
-    query = with_gaps(take, miss)
-    messages = []
-    alone = fill(query, "auto", report=messages.append)
-    rigid = fill(query, "rigid")
-    print(rmse_mm(alone, take, miss), rmse_mm(rigid, take, miss))
-    assert not alone.missing.any()
-    assert rmse_mm(alone, take, miss) < 0.7 * rmse_mm(rigid, take, miss)
+    alone, rigid, messages, query = _alone_and_rigid(take, "markers", 0.2, b"rate=0.2")
+    assert alone < 0.7 * rigid
     assert any(m.startswith("auto: no knowledge base: filled from the take alone")
                for m in messages)
     with pytest.raises(GapFillError, match="'auto' fills from the take alone"):
