@@ -511,7 +511,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         weight[first] = 0.0
     # the knowledge base has none of them: rigid partners carry them, or on long gaps the take's
     # own regression and a partner's pattern stand in for it (without a knowledge base too)
-    weight[[p for p in map(motion.names.index, lacking) if not own[p] > 0]] = 0.0
+    weight[[p for p in map(motion.names.index, lacking) if own[p] == 0]] = 0.0
     ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
     # the knowledge base sees those as observed (they are never another point's donors: an
     # estimate carried on would add its error to the next)
