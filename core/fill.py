@@ -72,8 +72,14 @@ AUTO_SPREAD_CAP = 2.0
 #: take's own regression of the point on the points seen through the gap
 #: (:func:`~.regression.regress_points`), weighted by its errors on the copies (on shorter gaps
 #: and on marker sets it misled the copies: docs/METHOD_NOTES.md, "Session 22"); without a
-#: knowledge base the regression (and the pattern below) alone stand in for it (session 73)
+#: knowledge base the regression (and the pattern below) alone stand in for it (session 73),
+#: from :data:`AUTO_ALONE_SECONDS`
 AUTO_MATCH_SECONDS = 1.0
+#: without a knowledge base the take's own regression and a partner's pattern join a skeleton
+#: joint whose gaps last this many seconds on the mean (with one they would mislead the models
+#: on shorter gaps; without one they are weighed against the rigid partners alone:
+#: docs/METHOD_NOTES.md, "Session 74")
+AUTO_ALONE_SECONDS = 0.5
 #: on those points a partner's pattern (:func:`~.baselines.fill_pattern`) joins the knowledge
 #: base's estimate too where it refills the copies better still, its error on them raised to at
 #: least this many times the variance of its offset to its steadiest partner seen through the
@@ -361,7 +367,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     the windows only where they refill them better, and then the take's own regression of the
     point on the rest of the body (:func:`~.regression.regress_points`), by its error on the
     copies, and a partner's pattern where it refills them better still
-    (:data:`AUTO_PATTERN_FLOOR`); without a knowledge base those two alone take its place. A
+    (:data:`AUTO_PATTERN_FLOOR`); without a knowledge base those two alone take its place, from
+    :data:`AUTO_ALONE_SECONDS`. A
     spline through the take joins longer gaps where it refilled the point's copies better than
     the fill is expected to do on the gap
     (:func:`_with_spline_joined`: most of the body gone at once leaves far partners and models
@@ -397,8 +404,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     probe = validation_gaps(missing, AUTO_PROBES,
                             least=0 if motion.parents is None else AUTO_PROBE_FRAMES,
                             enough=AUTO_PROBE_FRAMES)
+    seconds = AUTO_MATCH_SECONDS if kb is not None else AUTO_ALONE_SECONDS
     with np.errstate(invalid="ignore"):
-        long = (probe.any(axis=0) & (_mean_run(missing) >= AUTO_MATCH_SECONDS * motion.fps)
+        long = (probe.any(axis=0) & (_mean_run(missing) >= seconds * motion.fps)
                 & (motion.parents is not None))
 
     partners = {}  # the donors' statistics on this take, computed once
@@ -526,19 +534,19 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         # take's own windows a point gets depend on which others are matched with it)
         knn = _mix_in(knn, fill_match(given, kb, long, should_cancel).positions, windows)
         report(f"auto: windows of the knowledge base's motion join its models on "
-               f"{int((windows > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
+               f"{int((windows > 0).sum())} points with gaps of {seconds:g} s or more")
     if long.any() and (own > 0).any():
         # on the rest of the body as the knowledge base sees it (the points rigid partners carry
         # alone included), as the copies' regression saw it
         knn = _mix_in(knn, regress_points(given.positions, motion.names,
                                           missing & (own > 0)[None]), own)
         report(f"auto: the take's own regression on the rest of the body joins on "
-               f"{int((own > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or more")
+               f"{int((own > 0).sum())} points with gaps of {seconds:g} s or more")
     if long.any() and (by_partner > 0).any():
         knn = _mix_in(knn, baselines.fill_pattern(
             given.positions, only=missing & (by_partner > 0)[None]), by_partner)
         report(f"auto: a partner's pattern joins the knowledge base's estimate on "
-               f"{int((by_partner > 0).sum())} points with gaps of {AUTO_MATCH_SECONDS:g} s or "
+               f"{int((by_partner > 0).sum())} points with gaps of {seconds:g} s or "
                f"more")
     # the rigid donors' squared spread at each frame and on the mean of each point's copies
     spreads = _squared_spreads(probe, spread, copies_spread)

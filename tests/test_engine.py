@@ -1382,6 +1382,22 @@ def test_auto_without_a_knowledge_base_regresses_a_joint_gone_for_seconds_on_the
                for m in messages)
 
 
+def test_auto_without_a_knowledge_base_regresses_a_joint_gone_for_half_a_second(
+        walk, monkeypatch):
+    """Without a knowledge base the take's own regression joins from half a second
+    (``AUTO_ALONE_SECONDS``; with one, from a second). Daz 07_05, a tuning take, six joints
+    gone for 0.5 s at a time: when written 15.0 mm, from a second on 42.3, `rigid` 42.6 (non-test
+    takes at l = 30 frames, new / from a second on: 0.79; docs/METHOD_NOTES.md, session 74)."""
+    from mocap_gapfill.core import fill as fills
+
+    take = complete_take(walk, None)
+    alone, rigid, messages, _ = _alone_and_rigid(take, "joints", (6, 30), b"m=6,l=30")
+    assert alone < 0.5 * rigid
+    assert any("with gaps of 0.5 s or more" in m for m in messages)
+    monkeypatch.setattr(fills, "AUTO_ALONE_SECONDS", fills.AUTO_MATCH_SECONDS)
+    assert alone < 0.5 * _alone_and_rigid(take, "joints", (6, 30), b"m=6,l=30")[0]
+
+
 def _alone_and_rigid(take, protocol, setting, label):
     """``auto`` without a knowledge base and ``rigid`` on the protocol's gaps in ``take``: their
     RMSE over the missing samples (mm), ``auto``'s report and the gapped take."""
