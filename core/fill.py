@@ -368,9 +368,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     point on the rest of the body (:func:`~.regression.regress_points`), by its error on the
     copies, and a partner's pattern where it refills them better still
     (:data:`AUTO_PATTERN_FLOOR`); without a knowledge base those two alone take its place, from
-    :data:`AUTO_ALONE_SECONDS`. A
-    spline through the take joins longer gaps where it refilled the point's copies better than
-    the fill is expected to do on the gap
+    :data:`AUTO_ALONE_SECONDS`. A spline through the take joins longer gaps where it refilled
+    the point's copies better than the fill is expected to do on the gap
     (:func:`_with_spline_joined`: most of the body gone at once leaves far partners and models
     that see little), and they lean towards it next to their ends (:func:`_with_spline_ends`);
     short gaps (:data:`AUTO_SPLINE_SECONDS`) are last blended with that spline and a partner's
