@@ -281,6 +281,9 @@ MATCH_PIECE = 0.5
 MATCH_PIECE_MANY = 1.0
 MATCH_OWN = True
 MATCH_DAMP = True
+#: the windows' mean leans to a window that stands out (:func:`~.matching.match_windows`'
+#: ``lean``; session 77, docs/METHOD_NOTES.md)
+MATCH_LEAN = True
 
 
 @dataclass(frozen=True)
@@ -597,6 +600,7 @@ class _Job:
             found = match_windows(features, weight, kb_features, source, self.fps, kb.fps,
                                   [stretches[i] for i in chosen], width=width,
                                   on_stretch=on_stretch, kb_hidden=hidden, table=table,
+                                  lean=MATCH_LEAN,
                                   needs=[gap[busy[i][0]:busy[i][1] + 1].any(axis=0)
                                          for i in chosen])
             before += len(chosen)

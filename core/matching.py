@@ -21,11 +21,14 @@ from .normalize import denormalize, frames_of, normalize, reference_template
 SPEEDS = (0.8, 0.9, 1.0, 1.12, 1.25)
 #: windows averaged per stretch
 TOP = 5
+#: ``lean``: the best windows, near copies of each other included, whose distinct ones make the
+#: second set (tuned, docs/METHOD_NOTES.md, session 77)
+LEAN = 10
 
 
 def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretches,
                   speeds=SPEEDS, top=TOP, width=None, on_stretch=None, kb_hidden=None,
-                  needs=None, table=None):
+                  needs=None, table=None, lean=False):
     """Per stretch ``(lo, hi)`` of take frames: the mean, over the ``top`` best windows of the
     knowledge base, of their features at each frame lo..hi (an array (hi - lo + 1, items, d)),
     or None where the knowledge base has no window that long.
@@ -41,7 +44,11 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     and blend their means with overlapping triangles (the first and last piece reach the
     stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
     it may raise to stop). ``table``: :func:`pose_table` of ``kb_features``, where the caller
-    keeps it between calls.
+    keeps it between calls. ``lean``: per piece, the mean of the ``top`` best windows is
+    averaged, in equal parts, with the mean of the distinct ones among the :data:`LEAN` best,
+    near copies of each other included (a window one pose or one speed off the best costs
+    little more where the motion is smooth): where one window stands out, its near copies
+    crowd the others out of the second set, and the mean leans to it.
     """
     if not stretches:  # the table below costs a pass over the whole knowledge base
         return []
@@ -93,27 +100,40 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
         total = np.zeros((len(frames),) + kb_features.shape[1:])
         share = np.zeros(len(frames))
         for piece, (centre, candidates) in enumerate(zip(centres, found)):
-            chosen = []
-            for candidate in sorted(candidates):
-                if all(kb_source[candidate[2]] != kb_source[c[2]] or
-                       abs(candidate[2] - c[2]) >= candidate[3] // 2 for c in chosen):
-                    chosen.append(candidate)
-                if len(chosen) == top:
-                    break
-            if not chosen:
+            candidates = sorted(candidates)
+            sets = [_distinct(candidates, top, kb_source)]
+            if not sets[0]:
                 continue
+            if lean:
+                sets.append(_distinct(candidates[:LEAN], top, kb_source))
             taper = np.clip(1 - np.abs(frames - centre) / max(half, 1e-9), 0, 1)
             taper[(frames < centre) & (piece == 0)] = 1.0
             taper[(frames > centre) & (piece == len(centres) - 1)] = 1.0
             near = taper > 0
             mean = 0.0
-            for _, speed, t, span, start in chosen:  # pose t is the take's frame ``start``
-                poses = np.clip((frames[near] - start) * kb_fps / (speed * fps), 0, span - 1)
-                mean = mean + at_times(kb_features[t:t + span], poses, span - 1)
-            total[near] += taper[near, None, None] * mean / len(chosen)
+            for chosen in sets:
+                for _, speed, t, span, start in chosen:  # pose t is the take's frame ``start``
+                    poses = np.clip((frames[near] - start) * kb_fps / (speed * fps), 0,
+                                    span - 1)
+                    mean = mean + at_times(kb_features[t:t + span], poses, span - 1) / (
+                        len(chosen) * len(sets))
+            total[near] += taper[near, None, None] * mean
             share[near] += taper[near]
         out.append(total / share[:, None, None] if share.all() else None)
     return out
+
+
+def _distinct(candidates, count, kb_source):
+    """The first ``count`` of ``candidates`` (cost, speed, pose, span, start; best first) that
+    are not within half their span of an earlier one chosen in the same source."""
+    chosen = []
+    for candidate in candidates:
+        if all(kb_source[candidate[2]] != kb_source[c[2]] or
+               abs(candidate[2] - c[2]) >= candidate[3] // 2 for c in chosen):
+            chosen.append(candidate)
+            if len(chosen) == count:
+                break
+    return chosen
 
 
 def brackets(times, last):

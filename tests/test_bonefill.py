@@ -970,6 +970,43 @@ def test_window_search_finds_the_stretch_the_knowledge_base_holds():
     assert short.shape == (2, 5, 6) and np.isfinite(short).all()
 
 
+def test_window_search_leans_to_a_window_that_stands_out():
+    """Smooth motion: the knowledge base holds the stretch itself and four noisy copies of it.
+    The best five distinct windows are the five copies; ``lean`` averages their mean with that
+    of the distinct windows among the best ten, which are the exact one's near copies (a pose
+    off costs less than the noise): the error halves. Where the best windows have no near
+    copies (a random walk), it changes nothing."""
+    rng = np.random.default_rng(3)
+    t = np.arange(400.0)
+    omega = rng.uniform(0.05, 0.15, size=(1, 5, 6))
+    phase = rng.uniform(0, 2 * np.pi, size=(1, 5, 6))
+    walk = np.sin(omega * t[:, None, None] + phase)
+    weight = np.ones(walk.shape[:2])
+    weight[200:240, 2] = 0.0
+    truth = walk[150:291]
+    parts = [rng.normal(size=(200, 5, 6)), walk[100:341]]
+    for _ in range(4):
+        parts += [rng.normal(size=(200, 5, 6)), truth + rng.normal(scale=0.6, size=truth.shape)]
+    kb = np.concatenate(parts + [rng.normal(size=(200, 5, 6))]).astype(np.float32)
+    source = np.zeros(len(kb), int)
+    [grid] = match_windows(walk, weight, kb, source, 100.0, 100.0, [(150, 290)], speeds=(1.0,))
+    [lean] = match_windows(walk, weight, kb, source, 100.0, 100.0, [(150, 290)], speeds=(1.0,),
+                           lean=True)
+    assert np.abs(lean - (grid + truth) / 2).max() < 1e-5
+    assert np.abs(grid - truth).mean() > 0.1
+    rough = np.cumsum(rng.normal(size=(400, 5, 6)), axis=0)
+    parts = [10 * rng.normal(size=(200, 5, 6))]
+    for _ in range(6):
+        parts += [rough[150:291] + rng.normal(scale=0.3, size=truth.shape),
+                  10 * rng.normal(size=(200, 5, 6))]
+    kb = np.concatenate(parts).astype(np.float32)
+    source = np.zeros(len(kb), int)
+    [grid] = match_windows(rough, weight, kb, source, 100.0, 100.0, [(150, 290)], speeds=(1.0,))
+    [lean] = match_windows(rough, weight, kb, source, 100.0, 100.0, [(150, 290)],
+                           speeds=(1.0,), lean=True)
+    assert np.abs(lean - grid).max() < 1e-9 * np.abs(rough).max()
+
+
 def test_window_search_in_pieces_joins_motion_the_knowledge_base_holds_in_parts():
     """The stretch is in the knowledge base only in two overlapping parts, in two sources: no
     window holds all of it, but every piece of 0.5 s lies in one of them, and the pieces'
