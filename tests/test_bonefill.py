@@ -788,7 +788,8 @@ def test_a_gap_at_a_clip_end_goes_to_the_consensus_where_its_two_fills_agree(wal
     keys at both ends, nothing changes. Then ``auto`` on the walk (its subject out of the KB):
     three bones keyless for the first second and three others for the last (the ``bone-ends``
     protocol's n=3, l=120), measured 47.1 mm with the rule and 53.0 without it, the held key
-    151.0 mm (session 68)."""
+    151.0 mm (session 68); 39.0 and 41.8 since ``match`` leans to a window that stands out
+    (session 77)."""
     rig, channels, location, fps = walk
     b = rig.names.index("lShldr")
     last = len(channels) - 1
@@ -815,7 +816,7 @@ def test_a_gap_at_a_clip_end_goes_to_the_consensus_where_its_two_fills_agree(wal
     base = rmse(basis_matrices(rig, seen, location))
     print(f"\n07_05, clip ends, 3 bones for 1 s: auto {rmse(auto):.1f} mm, without the rule "
           f"{rmse(without):.1f}, held key {base:.1f}")
-    assert rmse(auto) < 0.93 * rmse(without) < 0.5 * base
+    assert rmse(auto) < 0.96 * rmse(without) < 0.5 * base
 
 
 def test_a_gap_with_two_keys_takes_the_fill_the_others_bear_out(walk, daz_kb, monkeypatch):
