@@ -110,13 +110,14 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
             taper[(frames < centre) & (piece == 0)] = 1.0
             taper[(frames > centre) & (piece == len(centres) - 1)] = 1.0
             near = taper > 0
-            mean = 0.0
+            shares = {}  # each window's share of the mean (one in both sets: both shares)
             for chosen in sets:
-                for _, speed, t, span, start in chosen:  # pose t is the take's frame ``start``
-                    poses = np.clip((frames[near] - start) * kb_fps / (speed * fps), 0,
-                                    span - 1)
-                    mean = mean + at_times(kb_features[t:t + span], poses, span - 1) / (
-                        len(chosen) * len(sets))
+                for window in chosen:
+                    shares[window] = shares.get(window, 0.0) + 1 / (len(chosen) * len(sets))
+            mean = 0.0
+            for (_, speed, t, span, start), part in shares.items():  # pose t: frame ``start``
+                poses = np.clip((frames[near] - start) * kb_fps / (speed * fps), 0, span - 1)
+                mean = mean + part * at_times(kb_features[t:t + span], poses, span - 1)
             total[near] += taper[near, None, None] * mean
             share[near] += taper[near]
         out.append(total / share[:, None, None] if share.all() else None)
