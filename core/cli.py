@@ -275,6 +275,9 @@ def cmd_evaluate(args):
                            gap_sources=args.gap_sources, kb_file=args.kb, progress=progress,
                            report=_report)
     progress.done()
+    if not results:
+        raise GapFillError("nothing to score: the test takes are too short for every setting "
+                           "asked for (no gaps)")
     print(table(results))
     if args.json:
         payload = {"protocol": args.protocol, "default_method": default,

@@ -201,7 +201,8 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
     """Run a protocol; a list of result dicts (method, setting, test, rmse_missing_mm, ...).
     Where a method cannot fill a take-setting (a :class:`GapFillError`: e.g. the root gone from
     every frame of a short take) it is reported, scored as filling nothing (inf) with the
-    message under ``error``, and the run goes on. Neither ``kb_sources`` nor ``kb_file``: no
+    message under ``error``, and the run goes on. A setting whose gaps a take is too short for
+    is reported and left out for that take. Neither ``kb_sources`` nor ``kb_file``: no
     knowledge base (what ``auto`` does with the take alone; the methods that need one score
     inf)."""
     report = report or (lambda message: None)
@@ -221,6 +222,11 @@ def evaluate(protocol, tests, kb_sources, methods=METHODS, fps=60.0, seed=0, k=N
         for label, setting in chosen:
             rng = np.random.default_rng([seed, *label.encode()])
             miss = punch_gaps(truth.n_frames, truth.n_points, protocol, setting, rng, truth.names)
+            if not miss.any():  # a take too short for the setting: nothing to score
+                report(f"{Path(test).name} {label}: the take is too short for it (no gaps); "
+                       "skipped")
+                done += len(methods)
+                continue
             query = with_gaps(truth, miss)
             for method in methods:
                 start = time.perf_counter()
@@ -330,7 +336,8 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
 
     Scores: :func:`bone_errors`. A method that cannot fill a take-setting (a
     :class:`GapFillError`) is reported and scored inf, with the message under ``error``, as in
-    :func:`evaluate`; the run goes on. Neither ``kb_sources`` nor ``kb_file``: no knowledge
+    :func:`evaluate`; the run goes on; a setting the take is too short for is reported and left
+    out for it. Neither ``kb_sources`` nor ``kb_file``: no knowledge
     base, as in :func:`evaluate`.
     """
     from .bonefill import fill_bones
@@ -350,6 +357,11 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
         truth = basis_matrices(rig, channels, location)
         for label, setting in chosen:
             gaps = punch_bone_gaps(rig, len(channels), setting, seed, ends)
+            if not gaps.any():  # a take too short for the setting: nothing to score
+                report(f"{Path(test).name} {label}: the take is too short for it (no gaps); "
+                       "skipped")
+                done += len(methods)
+                continue
             seen = interpolate_channels(channels, gaps)
             for method in methods:
                 start = time.perf_counter()

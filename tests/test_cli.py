@@ -192,9 +192,12 @@ def test_evaluate_goes_on_past_a_take_setting_a_method_cannot_fill(data_dir, tmp
 def test_evaluate_bones_goes_on_past_a_method_that_cannot_fill(data_dir, tmp_path):
     """Protocol bones on a short Daz take against a knowledge base of C3D markers, which shares
     no point with the armature: `match` cannot fill, and the run says so, scores it inf and goes
-    on; `interp` and `slerp`, which need no knowledge base, are scored on the same gaps."""
+    on; `interp` and `slerp`, which need no knowledge base, are scored on the same gaps. The
+    take (129 frames) is too short for gaps of 240 frames: that setting is said and left out,
+    not scored as NaN; asked for alone, the run stops with that said."""
     out = tmp_path / "bones.json"
-    r = cli("evaluate", "--protocol", "bones", "--settings", "n=1,l=15", "--methods", "interp",
+    r = cli("evaluate", "--protocol", "bones", "--settings", "n=1,l=15", "n=1,l=240",
+            "--methods", "interp",
             "match", "slerp", "--test", data_dir / "cmu/bvh/daz_friendly/09/09_03.bvh.gz",
             "--kb-sources", data_dir / "cmu/c3d/02_05.c3d", "--json", out, "--quiet")
     assert r.returncode == 0, r.stderr
@@ -205,6 +208,12 @@ def test_evaluate_bones_goes_on_past_a_method_that_cannot_fill(data_dir, tmp_pat
     assert all(0 < rows[m]["rmse_missing_mm"] < np.inf and "error" not in rows[m]
                for m in ("interp", "slerp"))
     assert len(rows["interp"]["gaps_mm"]) == len(rows["match"]["gaps_mm"]) == 4  # 129 frames
+    assert "09_03.bvh.gz n=1,l=240: the take is too short for it (no gaps); skipped" in r.stderr
+    assert {row["setting"] for row in json.loads(out.read_text())["results"]} == {"n=1,l=15"}
+    r = cli("evaluate", "--protocol", "bones", "--settings", "n=1,l=240", "--methods", "interp",
+            "--test", data_dir / "cmu/bvh/daz_friendly/09/09_03.bvh.gz", "--no-kb", "--quiet")
+    assert r.returncode != 0 and "too short for every setting" in r.stderr
+    assert "Traceback" not in r.stderr
 
 
 def test_evaluate_gaps_at_the_clip_ends(data_dir, tmp_path):
