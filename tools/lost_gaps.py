@@ -18,7 +18,9 @@ copies.
                                                    # CANDIDATES (regress_kernel, mix, ...)
                                                    # as auto makes it; LENGTHS=15,30:
                                                    # only those gap lengths; FURTHER=1: the
-                                                   # 19 further non-test Daz takes instead)
+                                                   # 19 further non-test Daz takes instead;
+                                                   # ENDS=1: protocol bone-ends, the gaps at
+                                                   # the clip's ends)
     python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, sessions 38, 52
     python tools/lost_gaps.py --tell OUT.jsonl     # how well each measure known at fill time
                                                    # tells the lost gaps (session 51; a FILLS run)
@@ -51,6 +53,7 @@ STEPS = np.linspace(0.0, 1.0, 21)
 
 def run(out):
     amc = bool(os.environ.get("AMC"))
+    ends = bool(os.environ.get("ENDS"))
     full = None if os.environ.get("NO_KB") else armature_kb(amc)
     paths = ([AMC / f"{t}.amc" for t in AMC_TUNING] if amc
              else [DAZ / t[:2] / f"{t}.bvh.gz"
@@ -69,7 +72,7 @@ def run(out):
                 if lengths and l not in lengths:
                     continue
                 label = f"n={n},l={l}"
-                gaps = punch_bone_gaps(rig, len(channels), (n, l))
+                gaps = punch_bone_gaps(rig, len(channels), (n, l), ends=ends)
                 if not gaps.any():
                     continue
                 seen = interpolate_channels(channels, gaps)
