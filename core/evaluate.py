@@ -311,12 +311,16 @@ def punch_bone_gaps(rig, n_frames, setting, seed=0, ends=False):
     random bones of :func:`gappable_bones`, drawn from ``seed`` and the setting's label (the
     same gaps for every method and every run). ``ends`` (protocol ``bone-ends``): instead, ``n``
     random bones lose their first ``l`` frames and ``n`` others their last ``l``: a take that
-    starts or stops with a broken bone, where Blender holds the one key."""
+    starts or stops with a broken bone, where Blender holds the one key. No gaps where the take
+    is too short for the setting (at the ends: ``l`` frames or fewer, which would leave a bone
+    no key at all)."""
     n, l = setting
     label = f"{'ends,' if ends else ''}n={n},l={l}"
     rng = np.random.default_rng([seed, *label.encode()])
     candidates = gappable_bones(rig)
     gaps = np.zeros((n_frames, len(rig.names)), dtype=bool)
+    if ends and l >= n_frames:
+        return gaps
     if ends:
         bones = rng.choice(candidates, 2 * n, replace=False)
         gaps[:l, bones[:n]] = True

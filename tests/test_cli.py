@@ -233,6 +233,10 @@ def test_evaluate_gaps_at_the_clip_ends(data_dir, tmp_path):
     gaps = punch_bone_gaps(rig, 500, (1, 30), ends=True)
     assert gaps[:30].sum() == gaps[-30:].sum() == gaps.sum() // 2 == 30
     assert set(np.flatnonzero(gaps.any(axis=0))) <= set(gappable_bones(rig))
+    # a take too short for the setting gets no gaps: a bone gapped throughout would keep its
+    # true values (nothing to interpolate from) and score every fill as perfect
+    assert not punch_bone_gaps(rig, 120, (1, 120), ends=True).any()
+    assert punch_bone_gaps(rig, 121, (1, 120), ends=True).sum() == 240
     out = tmp_path / "ends.json"
     r = cli("evaluate", "--protocol", "bone-ends", "--settings", "n=1,l=120", "--methods",
             "interp", "regress", "--test", walk, "--no-kb", "--json", out, "--quiet")
