@@ -67,6 +67,15 @@ $MG evaluate --protocol bone-ends --quiet --kb-sources "$AMC" --exclude-kb '*02_
   --methods auto interp regress match \
   --test "${AMC31[@]}" \
   --json docs/results/bone_ends_amc31.json
+# an armature of another lab: HDM05's one ASF/AMC take (actor dg, 202 frames, a subject nothing
+# was ever chosen on; CC BY-SA 3.0, evaluation only) against the CMU ASF/AMC knowledge base
+HDM05_AMC="$D/hdm05/asfamc/HDM_dg_06-03_03_120.amc"
+$MG evaluate --protocol bones --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
+  --methods auto interp bezier hermite slerp match regress learn \
+  --test "$HDM05_AMC" --json docs/results/bones_hdm05.json
+$MG evaluate --protocol bone-ends --quiet --kb-sources "$AMC" --exclude-kb '*02_01.amc' \
+  --methods auto interp regress match \
+  --test "$HDM05_AMC" --json docs/results/bone_ends_hdm05.json
 $MG evaluate --protocol endgaps --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
   --methods auto knn rigid pattern local-spline spline linear \
   --test "$D/cmu/c3d/85_02.c3d" --json docs/results/endgaps_cmu_kb.json
