@@ -5,11 +5,11 @@ which only sees arrays.
 """
 
 import os
-import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..core import explain
 from ..core.errors import GapFillError
 from ..core.fill import DEFAULT_METHOD
 from ..core.motion import gap_runs
@@ -308,78 +308,41 @@ def apply_fill(context, plans, results):
 
 def how_filled(choices, bone, first, last):
     """``(how, estimate, 0)`` of a listed gap of ``bone`` over the take's rows ``first``-``last``
-    from the rotation fill's choices of the gaps it overlaps: the fill (``interp``: Blender's
-    interpolation kept, also where the copies' fill was doubted all the way back to it; with
-    the share of the way from it where the fill went part of the way; on a short gap, the two
-    fills whose mean the part it kept of the interpolation went part of the way to, where they
-    agree, the share it went to the cubic where the take's copies favour it, and to ``learn``
-    where the bone's own windows trust it; last, how far it then went on towards the consensus
-    of a long gap: the knowledge base's motion and the take's own regression, or the
-    regression alone without a knowledge base, or towards ``learn`` on a gap of 0.4-0.6 s;
-    and the fill that took its place where it lay nearer the other fills than all before it)
-    and the copies' estimate of its error as a share of the interpolation's (the largest where
-    several, 0 where none judged it). No error in millimetres: an armature's copies foretell
-    the share, not the level (docs/METHOD_NOTES.md, session 34)."""
-    from ..core.bonefill import CORROBORATE, CORROBORATE_LEARN
-
-    def paired(c):  # how far the kept interpolation went on to the two fills that agree
-        return CORROBORATE_LEARN if "learn" in c.corroborated.split(" + ") else CORROBORATE
-
+    from the rotation fill's choices of the gaps it overlaps: in words, the fill its rotation
+    went to and what that was blended with (:func:`~..core.explain.bone_gap`; Blender's curve
+    kept: :data:`~..core.explain.KEPT`), and the copies' estimate of its error as a share of
+    the interpolation's (the largest where several, 0 where none judged it). No error in
+    millimetres: an armature's copies foretell the share, not the level."""
     parts = [c for c in choices if c.bone == bone and c.first <= last and c.last >= first]
     if not parts:
         return "", 0.0, 0.0
-    labels = [("interp" if c.share == 0 else c.method if c.share == 1
-               else f"{c.method} ({c.share:.0%} of the way)")
-              + (f", the rest {paired(c):.0%} to {c.corroborated}, which agree"
-                 if c.corroborated else "")
-              + (f", {c.cubic:.0%} to the cubic, which the take favours" if c.cubic else "")
-              + (f", {c.learnt:.0%} to learn, which the bone's windows trust"
-                 if c.learnt else "")
-              + (f", then the mean of {c.towards}" if c.consensus == 1 else
-                 f", then {c.consensus:.0%} to {c.towards}" if c.consensus else "")
-              + (f", then {c.medoid} in its place, which the other fills bear out"
-                 if c.medoid else "")
-              for c in parts]
     judged = [c.estimate for c in parts if np.isfinite(c.estimate)]
-    return ", ".join(dict.fromkeys(labels)), max(judged, default=0.0), 0.0
-
-
-#: the estimates ``auto`` blends into a marker's gap (:class:`~..core.fill.GapAccount`), in words
-SOURCES = (("rigid", "rigid partners"), ("models", "knowledge base"),
-           ("windows", "knowledge base's motion"), ("own", "take's own regression"),
-           ("spline", "spline"), ("pattern", "partner's pattern"))
+    return explain.bone_gap(parts), max(judged, default=0.0), 0.0
 
 
 def how_carried(accounts, point, first, last):
     """``(how, 0, expected_mm)`` of a listed gap of marker ``point`` over the take's rows
     ``first``-``last`` from ``auto``'s accounts of the gaps it overlaps: the estimates it
-    blended, by share (those of 5 % or more, largest first; means weighted by the gaps'
-    lengths), and the copies' RMS error of the fill in millimetres (the largest where several,
-    0 where none had copies)."""
+    blended, in words, by share (:func:`~..core.explain.point_gap`), and the copies' RMS error
+    of the fill in millimetres (the largest where several, 0 where none had copies)."""
     parts = [a for a in accounts if a.point == point and a.first <= last and a.last >= first]
     if not parts:
         return "", 0.0, 0.0
-    lengths = [a.last - a.first + 1 for a in parts]
-    shares = [(float(np.average([getattr(a, field) for a in parts], weights=lengths)), label)
-              for field, label in SOURCES]
-    how = ", ".join(f"{label} {share:.0%}" for share, label in sorted(shares, reverse=True)
-                    if share >= 0.05)
     judged = [a.estimate for a in parts if np.isfinite(a.estimate)]
-    return how, 0.0, 1000.0 * max(judged, default=0.0)
+    return explain.point_gap(parts), 0.0, 1000.0 * max(judged, default=0.0)
 
 
 def describe(gap, armature):
-    """How a filled gap was filled, in lines of words (the panel and ``blend`` say them)."""
+    """How a filled gap was filled, in lines of plain words (the panel and ``blend`` say them;
+    the panel is narrow: what the fill was blended with goes on a line of its own)."""
     if not gap.how:
         return []
-    if armature and gap.how == "interp":  # judged by copies: the fill doubted all the way back
-        return ["Blender's interpolation kept", "(the copies' best fill moved it less than its "
-                "own error)" if gap.estimate else "(no fill was judged better there)"]
-    if armature:  # each step after the fill on a line of its own (the panel is narrow): the
-        # rest of a short gap to an agreeing pair, the shares to the cubic and to learn, the
-        # consensus
-        first, *then = re.split(r", (?=then |the rest |\d+% to )", gap.how)
-        return [f"filled by {first}"] + then + (
-            [f"copies: {gap.estimate:.2f} of the interpolation's error"] if gap.estimate else [])
-    return [f"from {gap.how}"] + (
-        [f"copies: about {gap.expected_mm:.0f} mm RMS error"] if gap.expected_mm else [])
+    if not armature:
+        return [f"from {gap.how}"] + (
+            [f"expected error ~{gap.expected_mm:.0f} mm"] if gap.expected_mm else [])
+    if gap.how == explain.KEPT:
+        return [explain.KEPT, "(no fill was sure to beat it here)" if gap.estimate else
+                "(no fill was judged better here)"]
+    first, *then = gap.how.split(", blended with ")
+    return [f"from {first}"] + [f"blended with {t}" for t in then] + (
+        [explain.bone_estimate(gap.estimate)] if gap.estimate else [])

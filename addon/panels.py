@@ -2,6 +2,7 @@
 
 import bpy
 
+from ..core import explain
 from . import bridge, gaps, prefs
 
 
@@ -25,7 +26,7 @@ class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
         else:
             split.label(text=f"{frames} ({item.last - item.first + 1})")
         # filled (an armature's gap where Blender's interpolation was kept: its curve icon)
-        row.label(text="", icon="IPO_LINEAR" if item.how == "interp" else
+        row.label(text="", icon="IPO_LINEAR" if item.how == explain.KEPT else
                   "CHECKMARK" if item.filled else "BLANK1")
 
     def draw_filter(self, context, layout):

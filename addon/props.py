@@ -58,9 +58,8 @@ class MOCAP_GAPFILL_PG_gap(bpy.types.PropertyGroup):
     last: IntProperty(name="Last frame")
     kind: EnumProperty(name="Kind", items=GAP_KINDS, default="MISSING")
     filled: BoolProperty(name="Filled", description="Recovered keys were written for this gap")
-    how: StringProperty(name="Filled by", description="How the gap was filled: an armature's, "
-                        "the fill it took (interp where Blender's interpolation was kept); a "
-                        "marker's, the estimates blended into it and their shares")
+    how: StringProperty(name="Filled by", description="How the gap was filled, in words: "
+                        "what the fill used, and its share")
     estimate: FloatProperty(name="Estimate", min=0.0, description=(
         "An armature's gap: the fill's RMS error on copies of the gap (the same bone and "
         "length, where it is keyed) as a share of Blender's interpolation's; 0 where no copies "

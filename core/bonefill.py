@@ -326,7 +326,7 @@ class GapChoice:
 
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
                to_metres=None, settings=None, progress=None, should_cancel=None, report=None,
-               return_choices=False):
+               return_choices=False, trace=None):
     """Fill the rotation gaps of an armature take.
 
     Parameters
@@ -351,8 +351,11 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     to_metres : ndarray, shape (4, 4), optional
         Armature space -> world metres, Z up (default: identity).
     settings : KnnSettings, optional
+    report, trace : callable, optional
+        ``report(message)``: what the user is told; ``trace``: what each of ``auto``'s stages
+        did (``--verbose``).
     return_choices : bool
-        Also return how each gap was filled.
+        Also return how each gap was filled (:mod:`.explain` says it in words).
 
     Returns
     -------
@@ -381,7 +384,7 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     moves = rig.roots if moves is None else np.asarray(moves, dtype=bool)
     job = _Job(rig, fps, kb, moves, np.eye(4) if to_metres is None else np.asarray(to_metres),
                settings, progress or (lambda fraction, message: None), should_cancel,
-               report or (lambda message: None))
+               report or (lambda message: None), trace or (lambda message: None))
     seen = basis_matrices(rig, channels, location)
     if method == "interp" or not gaps.any():
         basis = seen
@@ -427,11 +430,12 @@ class _Job:
     """One fill: the rig, the knowledge base and the callbacks its steps share."""
 
     def __init__(self, rig, fps, kb, moves, to_metres, settings, progress, should_cancel,
-                 report):
+                 report, trace):
         self.rig, self.fps, self.kb, self.moves = rig, fps, kb, moves
         self.to_metres = to_metres
         self.settings = settings
         self.progress, self.should_cancel, self.report = progress, should_cancel, report
+        self.trace = trace  # what each of auto's stages did, for --verbose
         self.below = rig.placed_by()
         self._kb_features = None  # the knowledge base's rotations as match's features
         # a moving bone places its own head (heads rigs; a tails rig's root joint is its head)
@@ -751,9 +755,9 @@ class _Job:
         alone = self.kb is None
         rotations = alone or self.kb.turns is not None
         if alone:
-            self.report("auto: no knowledge base: " + TAKE_ALONE.removeprefix("auto "))
+            self.report("no knowledge base: " + TAKE_ALONE.removeprefix("auto "))
         elif not rotations:
-            self.report("auto: the knowledge base holds no bone rotations (built from markers "
+            self.report("the knowledge base holds no bone rotations (built from markers "
                         "or by an older version): filled from its joint positions; rebuild it "
                         "with 'kb build' from BVH or ASF/AMC takes for the rotation fill")
         names = (TAKE_ALONE_CANDIDATES if alone else AUTO_CANDIDATES if rotations
@@ -932,7 +936,7 @@ class _Job:
                                          ).items())
         pairs = sum(pair is not None for pair in corroborated)
         with_pairs_of_learn = any(pair and "learn" in pair for pair in corroborated)
-        self.report("auto: " + ", ".join(
+        self.trace("auto: " + ", ".join(
             f"{name} on {n} of {len(runs)} gaps"
             + (f" ({partly[name]} part of the way from the interpolation)" if partly[name] else "")
             for name, n in counts.items())
@@ -977,7 +981,7 @@ class _Job:
             if name:
                 out[a:e + 1, b] = paired_ends[name][a:e + 1, b]
         if any(self.medoids):
-            self.report(f"auto: {sum(map(bool, self.medoids))} of {sum(both)} gaps with two keys "
+            self.trace(f"auto: {sum(map(bool, self.medoids))} of {sum(both)} gaps with two keys "
                         f"take the one of {' / '.join(MEDOID_FILLS)} that lies nearer the other "
                         "fills than their own")
         return out

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import explain
 from .errors import GapFillError
 from .backend import DEVICES
 from .fill import BASELINES, DEFAULT_METHOD, METHODS, REVIEW_FIRST, worst_first
@@ -166,7 +167,8 @@ def cmd_fill(args):
     progress = Progress(args.quiet)
     out, accounts = fill(motion, args.method, kb=kb, progress=progress, report=_report,
                          settings=KnnSettings(k=args.k, device=args.device),
-                         max_gap=args.max_gap, return_account=True)
+                         max_gap=args.max_gap, return_account=True,
+                         trace=_report if args.verbose else None)
     progress.done()
     write_motion(out, dst, overwrite=args.force)
     n_filled = int((motion.missing & ~out.missing).sum())
@@ -175,17 +177,20 @@ def cmd_fill(args):
           + (f", {left} left missing" if left else ""))
     worst = worst_first(accounts or [])[:REVIEW_FIRST]
     if worst:
-        print("review first (what copies of the gaps expect of the error): "
-              + ", ".join(a.summary() for a in worst))
+        print("review first (the largest errors copies of the gaps expect):")
+        for a in worst:
+            print(f"  {a.point} frames {a.first + 1}-{a.last + 1}: {explain.point_gap([a])}; "
+                  f"{explain.expected(a.estimate)}")
     if args.gap_report:
         _write_gap_report(accounts, Path(args.gap_report))
         print(f"wrote {args.gap_report}: {len(accounts)} gaps, worst first")
     return 0
 
 
-#: the columns of ``fill --gap-report`` (shares of auto's estimates, the copies' RMS error)
-GAP_REPORT_FIELDS = ("point", "first_frame", "last_frame", "frames", "expected_mm", "rigid",
-                     "models", "windows", "own", "spline", "pattern")
+#: the columns of ``fill --gap-report``: the gap, the copies' RMS error, what filled it in words
+#: and the shares of auto's estimates
+GAP_REPORT_FIELDS = ("point", "first_frame", "last_frame", "frames", "expected_mm", "filled_from",
+                     "rigid", "models", "windows", "own", "spline", "pattern")
 
 
 def _write_gap_report(accounts, path):
@@ -197,7 +202,8 @@ def _write_gap_report(accounts, path):
     rows = [{"point": a.point, "first_frame": a.first + 1, "last_frame": a.last + 1,
              "frames": a.last - a.first + 1,
              "expected_mm": round(1000 * a.estimate, 2) if np.isfinite(a.estimate) else None,
-             **{k: round(getattr(a, k), 4) for k in GAP_REPORT_FIELDS[5:]}} for a in ordered]
+             "filled_from": explain.point_gap([a]),
+             **{k: round(getattr(a, k), 4) for k in GAP_REPORT_FIELDS[6:]}} for a in ordered]
     with atomic_output(path, overwrite=True) as tmp:
         if path.suffix.lower() == ".json":
             tmp.write_text(json.dumps(rows, indent=1))
@@ -365,6 +371,8 @@ def build_parser(extra=None):
                    "first (.csv or .json by extension; frames counted from 1)")
     p.add_argument("--force", action="store_true", help="replace the outputs if they exist")
     p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.add_argument("--verbose", "-v", action="store_true",
+                   help="also say what each stage of auto did")
     _add_read_options(p)
     p.set_defaults(func=cmd_fill)
 

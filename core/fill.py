@@ -241,7 +241,7 @@ def kb_for_take(names, method, kb=None, alone=TAKE_ALONE, choose="-k KB.npz"):
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
-         report=None, max_gap=None, return_account=False):
+         report=None, max_gap=None, return_account=False, trace=None):
     """Fill the gaps of a motion with the named method.
 
     Parameters
@@ -258,6 +258,9 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
         Gaps longer than this many frames are left unfilled.
     return_account : bool
         Also return how ``auto`` filled each gap.
+    report, trace : callable, optional
+        ``report(message)``: what the user is told (points left unfilled, ...); ``trace``: what
+        each of ``auto``'s stages did (``--verbose``).
 
     Returns
     -------
@@ -277,7 +280,8 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
         return (motion, [] if method == "auto" else None) if return_account else motion
     accounts = None
     if method == "auto":
-        out, accounts = _fill_auto(motion, kb, settings, progress, should_cancel, report)
+        out, accounts = _fill_auto(motion, kb, settings, progress, should_cancel, report,
+                                   trace)
     else:
         out = _fill(motion, method, kb, settings, progress, should_cancel, report)
     if max_gap:
@@ -335,7 +339,7 @@ def _with_fill(motion, out):
     return motion.replace(positions=out, filled=filled)
 
 
-def _fill_auto(motion, kb, settings, progress, should_cancel, report):
+def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
     """The knowledge-base fill and a rigid-body fill, blended per point by how well each refills
     copies of the point's gaps on this take.
 
@@ -395,6 +399,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
     from .regression import regress_in_frame, regress_points
 
     report = report or (lambda message: None)
+    trace = trace or (lambda message: None)  # what each stage did, for --verbose
     progress = progress or (lambda fraction, message: None)
     settings = settings or KnnSettings()
     # without a knowledge base the take alone fills: rigid partners, a spline, a partner's pattern
@@ -492,7 +497,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             on_copies = _mix_in(on_copies, placed_copies, among)
             rigid = _mix_in(rigid, placed_gaps, among)
             if (among > 0).any():
-                report(f"auto: the place among its rigid partners, regressed on further "
+                trace(f"auto: the place among its rigid partners, regressed on further "
                        f"partners, joins the rigid estimate on {int((among > 0).sum())} of "
                        f"{int(probe.any(axis=0).sum())} markers with copies")
         seen = probe.any(axis=0)
@@ -532,19 +537,19 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
         # matched as on the copies, over every point with long gaps (the stretches and the
         # take's own windows a point gets depend on which others are matched with it)
         knn = _mix_in(knn, fill_match(given, kb, long, should_cancel).positions, windows)
-        report(f"auto: windows of the knowledge base's motion join its models on "
+        trace(f"auto: windows of the knowledge base's motion join its models on "
                f"{int((windows > 0).sum())} points with gaps of {seconds:g} s or more")
     if long.any() and (own > 0).any():
         # on the rest of the body as the knowledge base sees it (the points rigid partners carry
         # alone included), as the copies' regression saw it
         knn = _mix_in(knn, regress_points(given.positions, motion.names,
                                           missing & (own > 0)[None]), own)
-        report(f"auto: the take's own regression on the rest of the body joins on "
+        trace(f"auto: the take's own regression on the rest of the body joins on "
                f"{int((own > 0).sum())} points with gaps of {seconds:g} s or more")
     if long.any() and (by_partner > 0).any():
         knn = _mix_in(knn, baselines.fill_pattern(
             given.positions, only=missing & (by_partner > 0)[None]), by_partner)
-        report(f"auto: a partner's pattern joins the knowledge base's estimate on "
+        trace(f"auto: a partner's pattern joins the knowledge base's estimate on "
                f"{int((by_partner > 0).sum())} points with gaps of {seconds:g} s or "
                f"more")
     # the rigid donors' squared spread at each frame and on the mean of each point's copies
@@ -575,25 +580,25 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             return harder(p, a, b, float(shares[a:b + 1, p].mean()))
 
         out, eased = _with_spline_joined(motion, out, copies, probe, spline, hidden_spline,
-                                         harder_at, report)
+                                         harder_at, trace)
         out = _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, weight == 0,
-                                report)
+                                trace)
 
         def rigid_of(hidden):
             return carried(motion.replace(positions=np.where(
                 hidden[..., None], np.nan, motion.positions)), hidden)[0]
 
-        out, short = _with_spline(motion, out, spline, per_sample, weight == 0, rigid_of, report)
+        out, short = _with_spline(motion, out, spline, per_sample, weight == 0, rigid_of, trace)
         eased.update(short)
-        out, at_ends = _with_pattern_ends(motion, out, per_sample, weight == 0, rigid_of, report)
+        out, at_ends = _with_pattern_ends(motion, out, per_sample, weight == 0, rigid_of, trace)
         eased.update(at_ends)
-    out, all_gone = _with_all_gone_learnt(motion, out, report)
-    out, holes = _with_holes_splined(motion, out, report)
+    out, all_gone = _with_all_gone_learnt(motion, out, trace)
+    out, holes = _with_holes_splined(motion, out, trace)
     eased.update({(p, a): (1.0, 0.0, float("nan")) for p, a in holes})
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
     if kb is not None:
-        report(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped "
+        trace(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped "
                f"points more than the knowledge base"
                + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
                   f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
@@ -623,7 +628,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report):
             windows=float(models * windows[p] * (1 - own[p])), own=float(models * own[p]),
             spline=float(spline_share), pattern=float(pattern_share + kb_share * by_partner[p]),
             estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
-    out = _with_distances_kept(motion, out, uncertainty, hold, report, partners)
+    out = _with_distances_kept(motion, out, uncertainty, hold, trace, partners)
     return _with_fill(motion, out), accounts
 
 
@@ -685,8 +690,8 @@ def _lacking_line(motion, out, lacking, no_kb):
                   else "filled from the take alone"].append(name)
     said = "; ".join(f"{fate}: {', '.join(names)}" for fate, names in fates.items() if names)
     if no_kb:
-        return "auto: no knowledge base: " + (said or "no gaps")
-    return "auto: points the knowledge base lacks: " + (said or f"{', '.join(lacking)} (no gaps)")
+        return "no knowledge base: " + (said or "no gaps")
+    return "points the knowledge base lacks: " + (said or f"{', '.join(lacking)} (no gaps)")
 
 
 def _on_copies_where(probe, on_copies_of, estimate, otherwise):

@@ -170,9 +170,9 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, sou
         interp = basis_matrices(rig, seen, location)
         said = []
         auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb,
-                                   report=said.append, return_choices=True)
+                                   report=said.append, return_choices=True, trace=said.append)
         assert any(s.startswith("auto:") for s in said)
-        assert any(s.startswith("auto: no knowledge base: fills from the take alone")
+        assert any(s.startswith("no knowledge base: fills from the take alone")
                    for s in said) == (daz_kb is None)
         assert np.array_equal(auto[~gaps], interp[~gaps])
         assert [(c.bone, c.first, c.last) for c in choices] == [
@@ -311,7 +311,7 @@ def test_root_gaps_and_bad_input(walk, daz_kb):
     gaps[50:80, 0] = True  # the hip: the KB knows poses about the root, not where it is
     said = []
     out = fill_bones(rig, channels, location, gaps, fps, kb=daz_kb, method="knn",
-                     report=said.append)
+                     report=said.append, trace=said.append)
     # the cubic, on the rotations (the baseline `hermite` takes it on the channels)
     cubic = fill_bones(rig, channels, location, gaps, fps, method="hermite")
     cubic[..., :3, :3] = hermite_rotations(basis_matrices(rig, channels, location)[..., :3, :3],
@@ -863,6 +863,7 @@ def test_a_gap_with_two_keys_takes_the_fill_the_others_bear_out(walk, daz_kb, mo
     rmse = _joint_rmse(rig, truth, gaps)
     said = []
     auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, report=said.append,
+                               trace=said.append,
                                return_choices=True)
     assert {c.medoid for c in choices} > {""} and any("lies nearer the other" in m for m in said)
     monkeypatch.setattr(bonefill, "MEDOID_FILLS", ())
@@ -892,6 +893,7 @@ def test_a_take_whose_copies_favour_the_cubic_takes_it_on_the_short_gaps_it_kept
     seen = interpolate_channels(channels, gaps)
     said = []
     auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=kb, report=said.append,
+                               trace=said.append,
                                return_choices=True)
     short = [c for c in choices if c.last - c.first + 1 < bonefill.LONG_STACK * fps]
     pulled = [c.cubic / (1 - c.share) for c in short if c.share < 1]
@@ -938,7 +940,8 @@ def test_a_take_too_short_for_copies_stacks_long_gaps_of_several_bones(walk, daz
             gaps[90:210, rig.names.index(name)] = True
         assert not gap_copies(gaps)
         seen, said = interpolate_channels(channels, gaps), []
-        filled = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, report=said.append)
+        filled = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, report=said.append,
+                            trace=said.append)
         assert chosen in said[-1]
         moved = rig.placed_by()[[rig.names.index(name) for name in bones]].any(axis=0)
 
@@ -1156,6 +1159,6 @@ def test_without_bone_rotations_auto_fills_from_positions(walk, daz_kb):
     with pytest.raises(GapFillError, match="bone rotations"):
         fill_bones(rig, seen, location, gaps, fps, kb=flat, method="match")
     said = []
-    out = fill_bones(rig, seen, location, gaps, fps, kb=flat, report=said.append)
+    out = fill_bones(rig, seen, location, gaps, fps, kb=flat, report=said.append, trace=said.append)
     assert any("no bone rotations" in s for s in said)
     assert np.array_equal(out[~gaps], basis_matrices(rig, seen, location)[~gaps])

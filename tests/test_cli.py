@@ -109,7 +109,7 @@ def test_kb_build_then_fill(data_dir, tmp_path):
     r = cli("fill", tmp_path / "unknown.npz", "-o", tmp_path / "z.npz")
     assert r.returncode == 0 and "filled 40 samples with auto" in r.stdout, r.stderr
     assert "until then, auto fills from the take alone" in r.stderr
-    assert "auto: no knowledge base: filled from the take alone: P5, P12" in r.stderr
+    assert "no knowledge base: filled from the take alone: P5, P12" in r.stderr
 
 
 def test_fill_reports_each_gap_worst_first(data_dir, tmp_path):
@@ -137,8 +137,13 @@ def test_fill_reports_each_gap_worst_first(data_dir, tmp_path):
         first, last = int(row["first_frame"]), int(row["last_frame"])
         assert abs(sum(shares) - 1) < 1e-3 and int(row["frames"]) == last - first + 1
         assert miss[first - 1:last, take.names.index(row["point"])].all()
-    worst = f"{rows[0]['point']} {rows[0]['first_frame']}-{rows[0]['last_frame']}"
-    assert f"review first (what copies of the gaps expect of the error): {worst} ~" in r.stdout
+    worst = f"{rows[0]['point']} frames {rows[0]['first_frame']}-{rows[0]['last_frame']}: "
+    assert f"  {worst}{rows[0]['filled_from']}; expected error ~" in r.stdout
+    assert all(row["filled_from"] for row in rows)
+    # in plain words: no stage or generator named by its internal name, unless asked for
+    assert not internal_names(r.stdout + r.stderr + "".join(row["filled_from"] for row in rows))
+    r = cli("fill", src, "-o", tmp_path / "verbose.c3d", "--verbose", "--quiet")
+    assert r.returncode == 0 and "auto: rigid partners carry" in r.stderr
     r = cli("fill", src, "-o", tmp_path / "out2.c3d", "--gap-report", tmp_path / "gaps.json",
             "--max-gap", "30", "--quiet")
     short = json.loads((tmp_path / "gaps.json").read_text())  # only the gaps it filled
@@ -151,6 +156,15 @@ def test_fill_reports_each_gap_worst_first(data_dir, tmp_path):
             tmp_path / "rigid.csv")
     assert r.returncode == 2 and "use --method auto" in r.stderr
     assert not (tmp_path / "out3.c3d").exists()  # checked before anything is filled
+
+
+def internal_names(text):
+    """The internal names of the fill's stages and generators that ``text`` contains."""
+    import re
+
+    from mocap_gapfill.core.explain import INTERNAL_NAMES
+
+    return sorted({n for n in INTERNAL_NAMES if re.search(rf"\b{n}\b", text)})
 
 
 def test_evaluate_writes_json(data_dir, tmp_path):

@@ -116,7 +116,7 @@ def test_auto_keeps_a_skeletons_bones_on_a_take_it_never_saw(data_dir, monkeypat
         return 1000 * np.percentile(np.abs(apart - lengths)[active], share)
 
     messages = []
-    kept = fills.fill(query, "auto", kb=kb, report=messages.append)
+    kept = fills.fill(query, "auto", kb=kb, report=messages.append, trace=messages.append)
     monkeypatch.setattr(fills, "_with_distances_kept", lambda motion, out, *rest: out)
     loose = fills.fill(query, "auto", kb=kb)
     print(rmse_mm(kept, take, miss), rmse_mm(loose, take, miss), bent(kept, 50), bent(loose, 50),
@@ -181,7 +181,8 @@ def test_a_markers_isolated_gaps_aim_at_its_partners_distances_about_the_gap(dat
         miss[start:start + 15, rng.integers(take.n_points)] = True
     query = with_gaps(take, miss)
     messages = []
-    local = rmse_mm(fills.fill(query, "auto", kb=kb, report=messages.append), take, miss)
+    local = rmse_mm(fills.fill(query, "auto", kb=kb, report=messages.append,
+                               trace=messages.append), take, miss)
     assert any("50% of the way to its own distance about the gap" in m for m in messages)
     monkeypatch.setattr(fills, "AUTO_KEPT_LOCAL", 0.0)
     mean = rmse_mm(fills.fill(query, "auto", kb=kb), take, miss)

@@ -138,7 +138,7 @@ def test_duplicated_and_empty_c3d_labels(kb, take, tmp_path):
     # the default fills the point the knowledge base lacks from its rigid partners, and says so
     messages = []
     out = fill(gapped, "auto", kb=kb, settings=FAST, report=messages.append)
-    assert "auto: points the knowledge base lacks: filled from the take alone: P11" in messages
+    assert "points the knowledge base lacks: filled from the take alone: P11" in messages
     assert not any("left unfilled" in m for m in messages) and not out.missing.any()
     error = np.linalg.norm(out.positions[30:70, 11] - part.positions[30:70, 11], axis=1)
     print(f"P11 from its rigid partners: {1000 * error.max():.1f} mm at most")

@@ -693,7 +693,8 @@ def test_auto_joins_a_markers_place_among_its_partners_to_the_rigid_estimate(dat
 
     kb, take, miss, query = _tuning_markers(data_dir, 0.2)
     lines = []
-    scores = {"auto": rmse_mm(fill(query, "auto", kb=kb, report=lines.append), take, miss)}
+    scores = {"auto": rmse_mm(fill(query, "auto", kb=kb, report=lines.append,
+                                   trace=lines.append), take, miss)}
     assert any("place among its rigid partners" in line for line in lines)
     monkeypatch.setattr(regression, "regress_in_frame",
                         lambda positions, *rest: np.full(np.shape(positions), np.nan))
@@ -1138,7 +1139,8 @@ def test_auto_without_a_knowledge_base_fills_dropped_frames(data_dir):
     positions = short.positions.copy()
     positions[8:11] = np.nan
     messages = []
-    filled = fill(short.replace(positions=positions), "auto", report=messages.append)
+    filled = fill(short.replace(positions=positions), "auto", report=messages.append,
+                  trace=messages.append)
     assert np.isfinite(filled.positions).all()
     assert any("holes no other estimate reached" in m for m in messages)
 
@@ -1407,7 +1409,7 @@ def _alone_and_rigid(take, protocol, setting, label):
                       np.random.default_rng([0, *label]), take.names)
     query = with_gaps(take, miss)
     messages = []
-    alone = fill(query, "auto", report=messages.append)
+    alone = fill(query, "auto", report=messages.append, trace=messages.append)
     assert not alone.missing.any()
     errors = rmse_mm(alone, take, miss), rmse_mm(fill(query, "rigid"), take, miss)
     print(*errors)
@@ -1422,7 +1424,7 @@ def test_auto_without_a_knowledge_base_fills_from_the_take_alone(data_dir):
     take = read_motion(data_dir / "cmu/c3d/02_05.c3d")
     alone, rigid, messages, query = _alone_and_rigid(take, "markers", 0.2, b"rate=0.2")
     assert alone < 0.7 * rigid
-    assert any(m.startswith("auto: no knowledge base: filled from the take alone")
+    assert any(m.startswith("no knowledge base: filled from the take alone")
                for m in messages)
     with pytest.raises(GapFillError, match="'auto' fills from the take alone"):
         fill(query, "knn")

@@ -249,8 +249,9 @@ def sample_step(state, window, area, wm):
         # long-gap consensus where there is one)
         listed = list(arm.mocap_gapfill.gaps)
         arm.mocap_gapfill.gap_index = next(
-            (i for i, g in enumerate(listed) if ", then " in g.how),
-            next((i for i, g in enumerate(listed) if g.how not in ("", "interp")), 0))
+            (i for i, g in enumerate(listed) if ", blended with " in g.how),
+            next((i for i, g in enumerate(listed) if g.how not in ("", "kept Blender's curve")),
+                 0))
         frame_object(arm, area, 170)
         state["step"] = 9
         return 1.0

@@ -9,6 +9,7 @@ with the truth in millimetres.
 
 import gzip
 import hashlib
+import re
 import shutil
 import subprocess
 import sys
@@ -16,6 +17,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+
+from mocap_gapfill.core.explain import KEPT
 
 LOCAL_MODULE = "bl_ext.mocap_gapfill_tests.mocap_gapfill"  # conftest.extension loads it
 
@@ -101,7 +104,10 @@ def test_a_marker_gap_names_every_estimate_blended_into_it(extension):
                 GapAccount("RELB", 10, 12, rigid=1.0, models=0.0, windows=0.0, own=0.0,
                            spline=0.0, pattern=0.0, estimate=0.009)]
     how, _, expected = gaps.how_carried(accounts, "LELB", 8, 20)
-    assert how == "rigid partners 40%, spline 34%, partner's pattern 25%" and expected == 3.0
+    assert how == "rigid partners 40%, smooth curve 34%, a partner's path 25%" and expected == 3.0
+    assert gaps.describe(SimpleNamespace(how=how, expected_mm=expected), False) == [
+        "from rigid partners 40%, smooth curve 34%, a partner's path 25%",
+        "expected error ~3 mm"]
 
 
 def test_an_armature_gap_names_the_fills_it_went_to(extension):
@@ -110,6 +116,7 @@ def test_an_armature_gap_names_the_fills_it_went_to(extension):
     ``learn`` where the bone's windows trust it, then on to ``learn`` on a gap of 0.4-0.6 s, then
     the fill the others bear out in its place; the interpolation kept where nothing moved it."""
     from mocap_gapfill.core.bonefill import GapChoice
+    from mocap_gapfill.core.explain import INTERNAL_NAMES
 
     _, _, gaps, _ = modules()
     choices = [GapChoice("lShldr", 10, 24, "mix", 0.5, 0.6, corroborated="hermite + regress",
@@ -122,27 +129,34 @@ def test_an_armature_gap_names_the_fills_it_went_to(extension):
                GapChoice("lShldr", 200, 214, "interp", 0.0),
                GapChoice("lShldr", 300, 359, "match", 1.0, 0.4, medoid="regress")]
     assert gaps.how_filled(choices, "lShldr", 10, 24)[:2] == (
-        "mix (50% of the way), the rest 50% to hermite + regress, which agree, 15% to the "
-        "cubic, which the take favours", 0.6)
+        "knowledge-base motion (50% of the way from Blender's curve), blended with a smooth "
+        "curve and the rest of the body", 0.6)
     assert gaps.how_filled(choices, "lShldr", 40, 54)[0] == (
-        "interp, 25% to the cubic, which the take favours")
+        "Blender's curve, blended with a smooth curve")
     assert gaps.how_filled(choices, "lShldr", 70, 84)[0] == (
-        "interp, the rest 42% to hermite + learn, which agree")
-    assert gaps.how_filled(choices, "lShldr", 200, 214)[0] == "interp"
+        "Blender's curve, blended with a smooth curve and the bone's own motion")
+    assert gaps.how_filled(choices, "lShldr", 200, 214)[0] == "kept Blender's curve"
     assert gaps.how_filled(choices, "lShldr", 300, 359)[0] == (
-        "match, then regress in its place, which the other fills bear out")
+        "the rest of the body, which the other fills bear out")
     assert gaps.how_filled(choices, "lShldr", 100, 114)[0] == (
-        "learn (40% of the way), 15% to learn, which the bone's windows trust")
+        "the bone's own motion (40% of the way from Blender's curve)")
     assert gaps.how_filled(choices, "lShldr", 130, 189)[0] == (
-        "stack (50% of the way), the rest 50% to hermite + match, which agree, then 20% to learn")
-    # the panel is narrow: each step after the fill on a line of its own
+        "a blend of several fills (50% of the way from Blender's curve), blended with a smooth "
+        "curve, knowledge-base motion and the bone's own motion")
+    # the panel is narrow: what the fill was blended with on a line of its own
     listed = SimpleNamespace(how=gaps.how_filled(choices, "lShldr", 10, 24)[0], estimate=0.6)
     assert gaps.describe(listed, True) == [
-        "filled by mix (50% of the way)", "the rest 50% to hermite + regress, which agree",
-        "15% to the cubic, which the take favours", "copies: 0.60 of the interpolation's error"]
-    listed.how = gaps.how_filled(choices, "lShldr", 130, 189)[0]
-    assert gaps.describe(listed, True)[1:3] == [
-        "the rest 50% to hermite + match, which agree", "then 20% to learn"]
+        "from knowledge-base motion (50% of the way from Blender's curve)",
+        "blended with a smooth curve and the rest of the body",
+        "expected error 0.60x Blender's curve"]
+    listed.how = gaps.how_filled(choices, "lShldr", 200, 214)[0]
+    assert gaps.describe(listed, True) == ["kept Blender's curve",
+                                           "(no fill was sure to beat it here)"]
+    # plain words: no stage or generator named by its internal name
+    for c in choices:
+        listed.how = gaps.how_filled(choices, "lShldr", c.first, c.last)[0]
+        words = " ".join(gaps.describe(listed, True))
+        assert not [n for n in INTERNAL_NAMES if re.search(rf"\\b{n}\\b", words)], words
 
 
 def test_blend_run_names_the_marker_gaps_to_review_first(scene, data_dir, marker_kb, tmp_path):
@@ -425,12 +439,13 @@ def test_bvh_armature_fill_beats_blender_interpolation(daz_armature, daz_kb, dat
                                                       - truth.positions[rows][:, joints]) ** 2,
                                                      axis=-1)))
         print(f"{gap.point}: {'; '.join(gaps.describe(gap, True))} (came out {fill_mm:.1f} mm)")
-        assert gap.how and moved == (gap.how != "interp"), (gap.point, gap.how)
-        assert gap.estimate < 1.0 and (gap.estimate > 0 or gap.how == "interp")
+        assert gap.how and moved == (gap.how != KEPT), (gap.point, gap.how)
+        assert gap.estimate < 1.0 and (gap.estimate > 0 or gap.how == KEPT)
         assert gap.expected_mm == 0  # an armature's copies foretell the share, not the level
         if gap.point in ("lForeArm", "rShin"):  # 100 / 90 frames at 120 fps: the long-gap
-            # consensus, said on a line of its own
-            assert gaps.describe(gap, True)[1] == "then 50% to match + regress_kernel"
+            # consensus with the rest of the body, said on a line of its own
+            said = gaps.describe(gap, True)[1]
+            assert said.startswith("blended with ") and said.endswith("the rest of the body")
 
     # keyed channels bit for bit: every key of the recovered action off the gaps is the original
     for curve in compat.fcurves(arm):
@@ -466,7 +481,7 @@ def test_bvh_armature_fill_beats_blender_interpolation(daz_armature, daz_kb, dat
 
     # Revert Gap: a filled gap back to Blender's interpolation, the other gaps as filled
     items = list(arm.mocap_gapfill.gaps)
-    i = next(k for k, g in enumerate(items) if g.how != "interp")
+    i = next(k for k, g in enumerate(items) if g.how != KEPT)
     reverted = items[i]
     arm.mocap_gapfill.gap_index = i
     assert bpy.ops.mocap_gapfill.revert_gap() == {"FINISHED"}
