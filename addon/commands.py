@@ -1,6 +1,9 @@
 """The command line's Blender commands (``mocap-gapfill blend``, and the scenes of
 ``mocap-gapfill demo``); bpy is imported only when one of them runs."""
 
+import os
+import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -41,19 +44,44 @@ def add_arguments(parser, with_input=False):
 
 
 def cmd_demo(args):
-    """The core demo (numbers, KBs, plot), then the Blender scenes when bpy is installed."""
-    from ..core.demo import run_demo
+    """The core demo (numbers, KBs, plot), then the Blender scenes when bpy is installed; a
+    short summary, every step with ``--verbose``."""
+    from ..core.cli import _quiet
+    from ..core.demo import run_demo, summary
 
-    demo = run_demo(args.outdir)
+    report = print if args.verbose else _quiet
+    demo = run_demo(args.outdir, report=report)
     try:
         import bpy  # noqa: F401
     except ImportError:
+        print("\n".join(summary(demo, args.outdir)))
         print("the bpy module is not installed: Blender scenes skipped "
               "(bash tools/setup.sh installs it)")
         return 0
-    demo_scenes(args.outdir, demo)
-    real_scenes(args.outdir)
+    with _blender_output(args.verbose):  # Blender prints each operator's report
+        demo_scenes(args.outdir, demo, report)
+        real_scenes(args.outdir, report)
+    print("\n".join(summary(demo, args.outdir, scenes=True)))
     return 0
+
+
+@contextmanager
+def _blender_output(shown):
+    """What Blender itself prints to standard output (operator reports, the BVH importer), shown
+    or sent to the null device."""
+    if shown:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    with open(os.devnull, "w") as null:
+        os.dup2(null.fileno(), 1)
+        try:
+            yield
+        finally:
+            sys.stdout.flush()
+            os.dup2(saved, 1)
+            os.close(saved)
 
 
 def cmd_blend(args):

@@ -298,10 +298,15 @@ def cmd_evaluate(args):
 
 
 def cmd_demo(args):
-    from .demo import run_demo
+    from .demo import run_demo, summary
 
-    run_demo(args.outdir)
+    demo = run_demo(args.outdir, report=print if args.verbose else _quiet)
+    print("\n".join(summary(demo, args.outdir)))
     return 0
+
+
+def _quiet(message):
+    """A report that says nothing (the short output of ``demo`` without ``--verbose``)."""
 
 
 def cmd_bench(args):
@@ -453,6 +458,8 @@ def build_parser(extra=None):
     p = sub.add_parser("demo", help="fill synthetic takes with gaps (offline) and show the "
                                     "accuracy on known truth")
     p.add_argument("outdir", nargs="?", default="out", help="where to write (default: out)")
+    p.add_argument("--verbose", "-v", action="store_true",
+                   help="every step and every method compared, not only the summary")
     p.set_defaults(func=cmd_demo)
     if extra is not None:
         extra(sub)

@@ -31,7 +31,7 @@ BONE_SOURCES = {
 KEPT = "kept Blender's curve"
 
 #: names of the fill's internal stages and generators that no message to a user contains
-INTERNAL_NAMES = ("interp", "hermite", "learn", "knn", "half", "recall", "match", "mix",
+INTERNAL_NAMES = ("interp", "hermite", "learn", "knn", "recall", "match", "mix",
                   "regress", "regress_pose", "regress_kernel", "stack", "stack_long", "medoid",
                   "models", "windows", "consensus")
 
