@@ -39,7 +39,7 @@ def focus_gap(context, owner, index):
 
 
 class MOCAP_GAPFILL_OT_file_info(bpy.types.Operator, ImportHelper):
-    """Read a motion capture file (C3D, BVH, AMC) and report its frames, rate, points and gaps"""
+    """Read a motion capture file and report its frames, rate, points and gaps"""
 
     bl_idname = "mocap_gapfill.file_info"
     bl_label = "Inspect Mocap File"
@@ -67,7 +67,7 @@ class MOCAP_GAPFILL_OT_file_info(bpy.types.Operator, ImportHelper):
 
 
 class MOCAP_GAPFILL_OT_import_markers(bpy.types.Operator, ImportHelper):
-    """Import a C3D file as marker empties: keys only where a marker was seen, gaps listed"""
+    """Import a C3D file as marker empties, keyed only where each marker was seen"""
 
     bl_idname = "mocap_gapfill.import_markers"
     bl_label = "Import C3D Markers"
@@ -75,8 +75,7 @@ class MOCAP_GAPFILL_OT_import_markers(bpy.types.Operator, ImportHelper):
 
     filter_glob: StringProperty(default="*.c3d;*.npz;*.csv", options={"HIDDEN"})
     up: EnumProperty(name="Up", default="DETECT", items=(
-        ("DETECT", "Detect", "As the file's header says, unless the markers lie on their side "
-                             "that way (head not above the feet): then turned to stand"),
+        ("DETECT", "Detect", "As the file's header says, unless the take then lies on its side"),
         ("FILE", "File header", "As the file's header (C3D POINT:Y_SCREEN) says"),
         ("y", "Y up", "The data is Y-up, whatever the header says"),
         ("z", "Z up", "The data is Z-up, whatever the header says")))
@@ -108,18 +107,16 @@ class MOCAP_GAPFILL_OT_import_markers(bpy.types.Operator, ImportHelper):
 
 
 class MOCAP_GAPFILL_OT_open_sample(bpy.types.Operator):
-    """Import a real CMU take shipped with the extension, with gaps to fill, and choose the
-    starter knowledge base without the take's subject (as for a take it has never seen)"""
+    """Open a real CMU take with gaps and pick the starter knowledge base without its subject"""
 
     bl_idname = "mocap_gapfill.open_sample"
     bl_label = "Open Sample Take"
     bl_options = {"REGISTER", "UNDO"}
 
     kind: EnumProperty(name="Sample", default="MARKERS", items=(
-        ("MARKERS", "Markers", "CMU 01_01 (C3D, 41 markers, 120 fps) with the gaps the capture "
-                               "really has"),
-        ("ARMATURE", "Armature", "CMU 03_02 (Daz-friendly BVH, 120 fps) through Blender's BVH "
-                                 "importer, the keys of lForeArm, rShin and chest deleted")))
+        ("MARKERS", "Markers", "CMU 01_01 (C3D, 41 markers) with the gaps the capture really has"),
+        ("ARMATURE", "Armature", "CMU 03_02 through Blender's BVH importer, three bones' keys "
+                                 "deleted")))
 
     def execute(self, context):
         from . import samples
@@ -135,7 +132,7 @@ class MOCAP_GAPFILL_OT_open_sample(bpy.types.Operator):
 
 
 class MOCAP_GAPFILL_OT_import_skeleton(bpy.types.Operator, ImportHelper):
-    """Import an ASF/AMC (or BVH) skeleton as an armature whose bones follow the joints"""
+    """Import an ASF/AMC or BVH skeleton as an armature"""
 
     bl_idname = "mocap_gapfill.import_skeleton"
     bl_label = "Import Skeleton (ASF/AMC)"
@@ -163,8 +160,7 @@ class MOCAP_GAPFILL_OT_import_skeleton(bpy.types.Operator, ImportHelper):
 
 
 class MOCAP_GAPFILL_OT_detect_gaps(bpy.types.Operator):
-    """Find gaps in the selected takes: frames without keys, and (optionally) keys that jump or
-    stretch a limb. Gaps marked by hand are kept"""
+    """Find the frames without keys in the selected takes, and keys that jump or stretch a limb"""
 
     bl_idname = "mocap_gapfill.detect_gaps"
     bl_label = "Detect Gaps"
@@ -188,8 +184,7 @@ class MOCAP_GAPFILL_OT_detect_gaps(bpy.types.Operator):
 
 
 class MOCAP_GAPFILL_OT_mark_gap(bpy.types.Operator):
-    """Mark the selected bones or markers as a gap over the preview range (or the selected
-    keyframes), to have them recovered"""
+    """Mark the selected bones or markers as a gap over the preview range or the selected keys"""
 
     bl_idname = "mocap_gapfill.mark_gap"
     bl_label = "Mark Gap"
@@ -255,8 +250,7 @@ class MOCAP_GAPFILL_OT_remove_gap(bpy.types.Operator):
 
 
 class MOCAP_GAPFILL_OT_revert_gap(bpy.types.Operator):
-    """Take the recovered keys of the selected gap out again: the original keys either side
-    show there as before the fill (for an armature, Blender's interpolation of them)"""
+    """Take the selected gap's recovered keys out again"""
 
     bl_idname = "mocap_gapfill.revert_gap"
     bl_label = "Revert Gap"
@@ -287,8 +281,7 @@ class MOCAP_GAPFILL_OT_revert_gap(bpy.types.Operator):
 
 
 class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
-    """Recover the gaps from the knowledge base (or by interpolation). Recovered keys go into a
-    copy of the action; the original is kept for preview"""
+    """Fill the gaps into a copy of the action, keeping the original to compare with"""
 
     bl_idname = "mocap_gapfill.fill_gaps"
     bl_label = "Fill Gaps"
@@ -334,8 +327,7 @@ class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
 
 
 class MOCAP_GAPFILL_OT_ghost(bpy.types.Operator):
-    """Show (or hide) a wireframe copy of the take playing its original keys beside the
-    recovered one"""
+    """Show or hide a wireframe copy of the take playing its original keys"""
 
     bl_idname = "mocap_gapfill.ghost"
     bl_label = "Ghost of Original"
@@ -395,8 +387,7 @@ class MOCAP_GAPFILL_OT_load_kb(bpy.types.Operator, ImportHelper):
 
 
 class MOCAP_GAPFILL_OT_build_kb(JobOperator, bpy.types.Operator):
-    """Build a knowledge base from a folder of motion files (BVH, ASF/AMC, C3D) or from the
-    actions of the selected take, save it in the extension's user folder and use it"""
+    """Build a knowledge base from a folder of motion files or the selected takes, and use it"""
 
     bl_idname = "mocap_gapfill.build_kb"
     bl_label = "Build Knowledge Base"
@@ -404,8 +395,7 @@ class MOCAP_GAPFILL_OT_build_kb(JobOperator, bpy.types.Operator):
 
     source: EnumProperty(name="From", default="FOLDER", items=(
         ("FOLDER", "Folder", "Motion files in a folder (searched recursively)"),
-        ("TAKE", "Selected take", "The selected armatures and marker sets (original keys; "
-                                  "frames with gaps are left out)")))
+        ("TAKE", "Selected take", "The selected takes' original keys, frames with gaps left out")))
     directory: StringProperty(name="Folder", subtype="DIR_PATH")
     name: StringProperty(name="Name", default="knowledge_base")
     fps: IntProperty(name="Frame rate", default=0, min=0,

@@ -12,8 +12,7 @@ class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
     error"""
 
     worst_first: bpy.props.BoolProperty(
-        name="Worst First", description="Order marker gaps by what copies of them expect of "
-        "the fill's error, largest first, to review those first")
+        name="Worst First", description="Sort marker gaps by their expected error, largest first")
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         icons = {"MISSING": "ERROR", "SUSPECT": "QUESTION", "MARKED": "BOOKMARKS"}

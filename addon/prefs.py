@@ -28,10 +28,9 @@ class MOCAP_GAPFILL_AP_preferences(bpy.types.AddonPreferences):
                                description="Used when a scene names no knowledge base")
     recent: CollectionProperty(type=MOCAP_GAPFILL_PG_recent)
     device: EnumProperty(name="Compute on", default="auto", items=(
-        ("auto", "Automatic", "A CUDA GPU through PyTorch when there is one, else PyTorch on the "
-                              "CPU, else numpy (PyTorch is optional: install it into Blender's "
-                              "Python to use it)"),
-        ("numpy", "NumPy", "numpy and scipy only"),
+        ("auto", "Automatic", "A CUDA GPU through PyTorch if there is one, else PyTorch on the "
+                              "CPU, else NumPy"),
+        ("numpy", "NumPy", "NumPy and SciPy only"),
         ("cpu", "PyTorch CPU", "PyTorch on the CPU"),
         ("cuda", "PyTorch CUDA", "PyTorch on a CUDA GPU")))
 

@@ -16,19 +16,14 @@ UNITS = (
     ("IN", "Inches", ""), ("CMU", "CMU units", "1/0.45 inch, the CMU ASF unit"),
 )
 METHOD_ITEMS = (
-    ("auto", "Automatic", "Markers: the knowledge base's fill blended, per point, with a "
-                          "rigid-body fill from the points that keep their distances to it, each "
-                          "weighted by how well it refills copies of the point's gaps. Armatures: "
-                          "only the gapped bones' rotations change, and only on gaps where the "
-                          "knowledge base refills copies of the gap better than Blender's own "
-                          "interpolation"),
-    ("knn", "Knowledge base", "Markers: nearest poses in the knowledge base, local PCA and "
-                              "optimisation, alone. Armatures: as Automatic"),
-    ("rigid", "Rigid body", "Each missing point carried by the 3 points whose distance to it "
-                            "varies least (as Vicon Nexus / QTM rigid-body fill); no knowledge "
-                            "base"),
-    ("pattern", "Pattern", "The gap follows the trajectory of the point that moves most like it "
-                           "(as Vicon Nexus pattern fill); no knowledge base"),
+    ("auto", "Automatic", "Every fill that helps (knowledge base, rigid partners, the rest of "
+                          "the body), judged on copies of each gap"),
+    ("knn", "Knowledge base", "The knowledge base alone: nearest poses and local PCA (armatures: "
+                              "as Automatic)"),
+    ("rigid", "Rigid body", "Carried by 3 points that keep their distance to it, as the Vicon "
+                            "and QTM rigid-body fill"),
+    ("pattern", "Pattern", "Follows the point that moves most like it, as the Vicon pattern "
+                           "fill"),
     ("linear", "Linear", "Linear interpolation of joint positions, for comparison"),
     ("spline", "Spline", "Cubic spline interpolation, for comparison"),
     ("local-spline", "Spline in the body's frame", "Cubic spline of each point with the root at "
@@ -61,12 +56,11 @@ class MOCAP_GAPFILL_PG_gap(bpy.types.PropertyGroup):
     how: StringProperty(name="Filled by", description="How the gap was filled, in words: "
                         "what the fill used, and its share")
     estimate: FloatProperty(name="Estimate", min=0.0, description=(
-        "An armature's gap: the fill's RMS error on copies of the gap (the same bone and "
-        "length, where it is keyed) as a share of Blender's interpolation's; 0 where no copies "
-        "judged it"))
+        "An armature gap's expected error as a share of Blender's interpolation's (0: not "
+        "judged)"))
     expected_mm: FloatProperty(name="Expected error", min=0.0, description=(
-        "A marker's gap: what copies of it (the same marker and length, where it is seen) "
-        "expect of the fill's RMS error, in millimetres; 0 where no copies judged it"))
+        "A marker gap's expected error in millimetres, from copies of the gap (0: not "
+        "judged)"))
 
 
 class MOCAP_GAPFILL_PG_point(bpy.types.PropertyGroup):
@@ -110,9 +104,8 @@ class MOCAP_GAPFILL_PG_scene(bpy.types.PropertyGroup):
     detect_suspects: BoolProperty(name="Detect suspect data", default=True,
                                   description="Also flag keys that jump or stretch a limb")
     jump_factor: FloatProperty(name="Jump factor", default=8.0, min=2.0,
-                               description="A key further than this many times the point's "
-                               "usual distance (and over 3 cm) from the midpoint of its "
-                               "neighbouring frames is a jump")
+                               description="Flag a key this many times further than usual "
+                               "from its neighbours' midpoint (and over 3 cm)")
 
 
 class MOCAP_GAPFILL_PG_job(bpy.types.PropertyGroup):

@@ -289,12 +289,25 @@ def cmd_evaluate(args):
         payload = {"protocol": args.protocol, "default_method": default,
                    "baselines": [m for m in baselines if m in methods], "fps": args.fps,
                    "seed": args.seed, "k": args.k,
-                   "tests": [str(t) for t in args.test],
-                   "kb_sources": [str(s) for s in args.kb_sources or [args.kb] if s],
+                   "tests": [_data_path(t) for t in args.test],
+                   "kb_sources": [_data_path(s) for s in args.kb_sources or [args.kb] if s],
                    "results": results}
         Path(args.json).write_text(json.dumps(payload, indent=1))
         print(f"wrote {args.json}")
     return 0
+
+
+def _data_path(path):
+    """``path`` as the evaluation's JSON names it: under the test data folder
+    (``MOCAP_GAPFILL_DATA``), from there on (``$MOCAP_GAPFILL_DATA/cmu/...``)."""
+    import os
+
+    data = os.environ.get("MOCAP_GAPFILL_DATA")
+    try:
+        return "$MOCAP_GAPFILL_DATA/" + Path(path).resolve().relative_to(
+            Path(data).resolve()).as_posix()
+    except (TypeError, ValueError):  # no data folder set, or a path outside it
+        return str(path)
 
 
 def cmd_demo(args):

@@ -197,7 +197,7 @@ class Target:
             self.read()
             self.counts["read"] += 1
         except GapFillError as exc:
-            self.counts["error: " + outcome_key(str(exc))] += 1
+            self.counts["error: " + outcome_key(str(exc).replace(f"{self.tmp}/", "<tmp>/"))] += 1
         finally:
             self.slowest = max(self.slowest, time.perf_counter() - t0)
         total = sum(self.counts.values())

@@ -48,6 +48,8 @@ chroot "$ROOTFS" bash -c '
   exit $code' || { tail -40 "$ROOTFS/work/out/blender.log"; exit 1; }
 mkdir -p "$OUT"
 for f in "$ROOTFS"/work/out/*.png; do cp "$f" "$OUT/${SUITE}_$(basename "$f")"; done
+# the chroot's paths as the user's would read: out/ and the Blender user folder
 cat "$ROOTFS/work/out/build.log" "$ROOTFS/work/out/blender.log" | grep -E "^(mocap_gapfill|Blender)" \
+  | sed -e 's#/work/out/#out/#g' -e 's#/work/home/blender/#<Blender user folder>/#g' \
   | tee "$OUT/${SUITE}_log.txt"
 ls -la "$OUT"

@@ -1,7 +1,7 @@
 """Markdown tables from evaluation JSON files (mocap-gapfill evaluate --json).
 
 Usage: python tools/results_table.py docs/results/*.json (bench.json from mocap-gapfill bench
-gives the speed tables)
+gives the speed tables); with --summary first, one line per file (docs/EVALUATION.md's summary)
 Per setting: mean RMSE over missing entries (and over all entries, or the angle error for bones)
 across test takes, per method, each of our methods' ratio to the best baseline, and the spread of
 the default's ratio to the best baseline of each take.
@@ -63,7 +63,7 @@ def table(path):
     out = [f"### {Path(path).stem}: protocol `{payload['protocol']}`, {payload.get('fps')} fps, "
            f"seed {payload.get('seed')}",
            f"Test takes ({len(tests)}): {', '.join(tests)}. Knowledge base: "
-           f"{', '.join(Path(s).as_posix().split('data/')[-1] for s in payload['kb_sources'])}, "
+           f"{', '.join(_data_path(s) for s in payload['kb_sources'])}, "
            f"test subject left out. Default method: `{default}`; baselines: "
            f"{', '.join(baselines)}.", "",
            "| setting | " + " | ".join(methods) + " | "
@@ -102,6 +102,54 @@ def table(path):
     return "\n".join(out)
 
 
+def summary_table(paths):
+    """One Markdown table over evaluation JSON files: per file the protocol, the test takes, the
+    knowledge base, and the default's RMSE over the best baseline's (per setting, means over
+    the takes: their geometric mean and range over the settings; per take and setting: the
+    range), and for armatures the same against Blender's interpolation alone."""
+    out = ["| results | protocol | test takes | knowledge base | default / best baseline: "
+           "geometric mean (settings' range) | per take | default / Blender's interpolation |",
+           "|---|---|---:|---|---:|---:|---:|"]
+    for path in paths:
+        payload = json.loads(Path(path).read_text())
+        if "protocol" not in payload:
+            continue
+        rows, default = payload["results"], payload.get("default_method", "knn")
+        baselines = payload.get("baselines") or [m for m in {r["method"] for r in rows}
+                                                 if m not in OURS]
+        got = {(r["setting"], r["method"], r["test"]): r["rmse_missing_mm"] for r in rows}
+        settings = list(dict.fromkeys(r["setting"] for r in rows))
+        tests = sorted({r["test"] for r in rows})
+
+        def mean(s, m):
+            return np.mean([got[(s, m, t)] for t in tests if (s, m, t) in got])
+
+        ratios = [mean(s, default) / min(mean(s, b) for b in baselines) for s in settings]
+        per_take = [got[(s, default, t)] / min(got[(s, b, t)] for b in baselines)
+                    for s in settings for t in tests if (s, default, t) in got]
+        interp = ([mean(s, default) / mean(s, "interp") for s in settings]
+                  if "interp" in baselines else [])
+        kb = ", ".join(_data_path(k) for k in payload["kb_sources"]) or "none"
+        out.append(f"| {Path(path).stem} | {payload['protocol']} | {len(tests)} | {kb} | "
+                   f"{_geomean(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f}) | "
+                   f"{min(per_take):.2f}-{max(per_take):.2f} | "
+                   + (f"{_geomean(interp):.2f} ({min(interp):.2f}-{max(interp):.2f})"
+                      if interp else "") + " |")
+    return "\n".join(out)
+
+
+def _data_path(path):
+    """A path of the test data as the evaluation names it, from the data folder on."""
+    return Path(path).as_posix().split("data/")[-1].removeprefix("$MOCAP_GAPFILL_DATA/")
+
+
+def _geomean(values):
+    return float(np.exp(np.mean(np.log(values))))
+
+
 if __name__ == "__main__":
-    print("\n".join(bench_table(p) if "machine" in json.loads(Path(p).read_text()) else table(p)
-                    for p in sys.argv[1:]))
+    if sys.argv[1:2] == ["--summary"]:
+        print(summary_table(sys.argv[2:]))
+    else:
+        print("\n".join(bench_table(p) if "machine" in json.loads(Path(p).read_text())
+                        else table(p) for p in sys.argv[1:]))

@@ -3,7 +3,8 @@
 # on 2 cores. Writes docs/results/*.json and prints the tables.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-D=${MOCAP_GAPFILL_DATA:-../shared/data}
+export MOCAP_GAPFILL_DATA=${MOCAP_GAPFILL_DATA:-../shared/data}  # the JSON names takes from here on
+D=$MOCAP_GAPFILL_DATA
 MG=".venv/bin/mocap-gapfill"
 mkdir -p docs/results
 export OMP_NUM_THREADS=2
