@@ -5,6 +5,7 @@ which only sees arrays.
 """
 
 import os
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -334,15 +335,18 @@ def how_carried(accounts, point, first, last):
 
 def describe(gap, armature):
     """How a filled gap was filled, in lines of plain words (the panel and ``blend`` say them;
-    the panel is narrow: what the fill was blended with goes on a line of its own)."""
+    the panel is narrow: each source on a line of its own)."""
     if not gap.how:
         return []
-    if not armature:
-        return [f"from {gap.how}"] + (
+    if not armature:  # "from knowledge base 60%", "rigid partners 40%", the expected error
+        first, *rest = gap.how.split(", ")
+        return [f"from {first}", *rest] + (
             [f"expected error ~{gap.expected_mm:.0f} mm"] if gap.expected_mm else [])
     if gap.how == explain.KEPT:
         return [explain.KEPT, "(no fill was sure to beat it here)" if gap.estimate else
                 "(no fill was judged better here)"]
-    first, *then = gap.how.split(", blended with ")
-    return [f"from {first}"] + [f"blended with {t}" for t in then] + (
+    first, *blended = gap.how.split(", blended with ")
+    sources = re.split(r", | and ", blended[0]) if blended else []
+    return [f"from {first}"] + [("blended with " if i == 0 else "and ") + source
+                                for i, source in enumerate(sources)] + (
         [explain.bone_estimate(gap.estimate)] if gap.estimate else [])

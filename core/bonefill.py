@@ -384,7 +384,7 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     moves = rig.roots if moves is None else np.asarray(moves, dtype=bool)
     job = _Job(rig, fps, kb, moves, np.eye(4) if to_metres is None else np.asarray(to_metres),
                settings, progress or (lambda fraction, message: None), should_cancel,
-               report or (lambda message: None), trace or (lambda message: None))
+               report or (lambda message: None), trace)
     seen = basis_matrices(rig, channels, location)
     if method == "interp" or not gaps.any():
         basis = seen
@@ -430,12 +430,12 @@ class _Job:
     """One fill: the rig, the knowledge base and the callbacks its steps share."""
 
     def __init__(self, rig, fps, kb, moves, to_metres, settings, progress, should_cancel,
-                 report, trace):
+                 report, trace=None):
         self.rig, self.fps, self.kb, self.moves = rig, fps, kb, moves
         self.to_metres = to_metres
         self.settings = settings
         self.progress, self.should_cancel, self.report = progress, should_cancel, report
-        self.trace = trace  # what each of auto's stages did, for --verbose
+        self.trace = trace or (lambda message: None)  # what each stage of auto did (--verbose)
         self.below = rig.placed_by()
         self._kb_features = None  # the knowledge base's rotations as match's features
         # a moving bone places its own head (heads rigs; a tails rig's root joint is its head)

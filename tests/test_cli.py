@@ -453,8 +453,7 @@ def test_demo_is_the_main_job(tmp_path):
     assert not internal_names(" ".join(how.values())), how
     # the forearm's gap (0.83 s) went on to the long-gap consensus of the knowledge base's
     # motion and the take's own regression
-    assert how["lForeArm"].endswith("blended with knowledge-base motion and the rest of the "
-                                    "body"), how
+    assert how["lForeArm"].endswith("blended with knowledge-base motion and the other bones"), how
     assert all(real_bones[b][0] == real_bones[b][1] for b, by in how.items()
                if by == "kept Blender's curve")
     # measured 116.6 / 74.1 / 10.4 vs 128.2 / 86.0 / 7.2 mm: the chest's cubic and regression

@@ -207,12 +207,18 @@ def step():
         result = bpy.ops.mocap_gapfill.open_sample("EXEC_DEFAULT", kind="ARMATURE")
     arm = bpy.context.view_layer.objects.active
     state["sample"] = arm.name
-    say("sample armature:", result, arm.name, len(arm.mocap_gapfill.gaps), "gaps:",
+    say("quick start 2, Sample: Armature:", result, arm.name, len(arm.mocap_gapfill.gaps), "gaps:",
         [(g.point, g.first, g.last) for g in arm.mocap_gapfill.gaps], "knowledge base:",
         bpy.context.scene.mocap_gapfill.kb_path)
     frame_object(arm, area, 170)
     state["step"] = 7
     return 1.0
+
+
+def gaps_module():
+    import importlib
+
+    return importlib.import_module(MODULE + ".addon.gaps")
 
 
 def frame_object(obj, area, frame):
@@ -234,7 +240,7 @@ def sample_step(state, window, area, wm):
         with bpy.context.temp_override(window=window, area=area):
             result = bpy.ops.mocap_gapfill.fill_gaps("INVOKE_DEFAULT", scope="ALL",
                                                      objects=arm.name)
-        say("fill of the sample armature invoked:", result)
+        say("quick start 3, Fill All Gaps:", result)
         state["step"] = 8
         return 0.1
     if state["step"] == 8:
@@ -256,6 +262,14 @@ def sample_step(state, window, area, wm):
         state["step"] = 9
         return 1.0
     shot("6_sample_armature_filled")
+    gap = arm.mocap_gapfill.gaps[arm.mocap_gapfill.gap_index]
+    say("quick start 4, the selected gap says:", gap.point,
+        gaps_module().describe(gap, True))
+    # quick start 5: Original / Recovered switches the action, then Revert Gap
+    arm.mocap_gapfill.showing = "ORIGINAL"
+    say("quick start 5, Original:", arm.animation_data.action.name)
+    arm.mocap_gapfill.showing = "RECOVERED"
+    say("quick start 5, Recovered:", arm.animation_data.action.name)
     with bpy.context.temp_override(window=window, area=area):
         result = bpy.ops.mocap_gapfill.revert_gap()
     gap = arm.mocap_gapfill.gaps[arm.mocap_gapfill.gap_index]
