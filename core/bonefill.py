@@ -12,7 +12,7 @@ frames:
   smoothing it gives new keys by default (:func:`~.rig.bezier_channels`);
 - ``hermite`` (a baseline: a cubic on Blender's F-curves): each channel a cubic from the key
   before the gap to the key after it, leaving and arriving with the velocities the keys show
-  (damped on gaps over ``HERMITE_SECONDS``); closer to the motion on short gaps than
+  (damped on gaps over ``hermite_seconds``); closer to the motion on short gaps than
   ``bezier``, whose handles level out at every turn of a curve (docs/EVALUATION.md).
   The fills of the project's own (``auto``'s candidates, ``knn``'s start) take the same cubic
   on the rotations instead of their Euler channels, which race near gimbal lock
@@ -46,28 +46,28 @@ frames:
 - ``auto`` (the default): per gap ``match``, ``mix`` (a quarter of the way from ``hermite`` to
   ``match``), ``stack`` (``interp``, ``hermite``, ``match`` and ``regress`` weighed together
   frame by frame, by the frame's distance from the keys: :mod:`.stacking`, the weights that
-  refill the take's copies best), on gaps under ``LEARN_SECONDS`` (0.4 s) also ``learn``, or
+  refill the take's copies best), on gaps under ``learn_seconds`` (0.4 s) also ``learn``, or
   ``interp``, as copies of the gap - same bone, same length,
   placed where the bone is keyed - refilled by each say (:meth:`_Job.auto`); gaps of
-  ``LONG_STACK`` seconds or more that none of them improves take ``stack_long`` (the stack with
+  ``long_stack`` seconds or more that none of them improves take ``stack_long`` (the stack with
   ``regress`` on the pose alone and ``regress`` with a Gaussian kernel beside; in equal parts
   in a take too short for copies, where other bones' gaps overlap the gap), and so do gaps of
-  ``FEW_COPIES`` seconds or more that fewer than ``AUTO_COPIES`` copies of their own fit
-  beside; every gap of ``LONG_STACK`` seconds or more that does not keep ``interp`` then goes
-  halfway on to the mean of ``match`` and ``regress_kernel`` (``CONSENSUS``: three estimates
+  ``few_copies`` seconds or more that fewer than ``auto_copies`` copies of their own fit
+  beside; every gap of ``long_stack`` seconds or more that does not keep ``interp`` then goes
+  halfway on to the mean of ``match`` and ``regress_kernel`` (``consensus``: three estimates
   from different evidence, averaged); the shorter gaps go from ``interp`` towards their fill
   only as far as the fills agree on the gap, and as far as it departs from ``interp`` beyond
-  the error its copies expect of it (``AUTO_WARY``), and the part of the interpolation such a
-  gap keeps goes half way on to the mean of two stacked fills that agree on it (``CORROBORATE``:
+  the error its copies expect of it (``auto_wary``), and the part of the interpolation such a
+  gap keeps goes half way on to the mean of two stacked fills that agree on it (``corroborate``:
   two estimates from different evidence bearing each other out; on a gap ``learn`` is judged on,
-  ``learn`` may be one of them, and then ``CORROBORATE_LEARN`` of the way); a gap of 0.4 s up to
-  ``MID_LEARN_SECONDS`` (0.6 s) with keys beyond its keys then goes ``MID_LEARN`` (a fifth) of
+  ``learn`` may be one of them, and then ``corroborate_learn`` of the way); a gap of 0.4 s up to
+  ``mid_learn_seconds`` (0.6 s) with keys beyond its keys then goes ``mid_learn`` (a fifth) of
   the way on to ``learn``, too long to be judged by the copies there; in a take too short for
   copies, a long gap keeps ``interp`` where it and ``regress`` agree far more closely than
   either does with ``match``, and takes the mean of ``match`` and ``regress_kernel`` where
-  ``match`` would fill it unjudged (``UNJUDGED_CONSENSUS``); a gap at a clip end (one key,
+  ``match`` would fill it unjudged (``unjudged_consensus``); a gap at a clip end (one key,
   which Blender holds) goes on to the mean of ``match`` and ``regress_kernel`` where the two
-  agree on it (``ENDS_SHARE``: all the way);
+  agree on it (``ends_share``: all the way);
   with a knowledge base of positions only, ``knn``, ``half`` (half-way from ``interp`` to
   ``knn``) and ``recall`` (subtrees carried onto the knowledge base's guess from the known
   joints alone: a KB that holds the motion) stand in; without a knowledge base (a rig no
@@ -107,103 +107,18 @@ BONE_METHODS = ("auto", "knn", "match", "regress", "learn", "interp", "bezier", 
 BONE_BASELINES = ("interp", "bezier", "hermite", "slerp")
 #: every candidate a gap can take (``half``: half-way from ``interp`` to ``knn``; ``recall``:
 #: the subtree carried onto the knowledge base's guess from the known joints alone; ``mix``:
-#: :data:`MIX_SHARE` of the way from ``hermite`` to ``match``)
+#: ``mix_share`` of the way from ``hermite`` to ``match``)
 CANDIDATES = ("interp", "hermite", "learn", "knn", "half", "recall", "match", "mix", "regress",
               "regress_pose", "regress_kernel")
 #: what ``auto`` chooses from beside ``interp``: with a knowledge base of bone rotations, and
 #: without one (built from positions alone, or by an older version)
 AUTO_CANDIDATES = ("match", "mix", "learn")
-#: ``auto`` judges ``learn`` only on gaps shorter than this (seconds) with keys either side (the
-#: bone's own interpolator gains on gaps of 0.125-0.25 s and loses from 0.5 s on the non-test
-#: takes; at a clip's end it holds the key; docs/METHOD_NOTES.md, session 61)
-LEARN_SECONDS = 0.4
-#: the part of such a gap that ``auto`` keeps of the interpolation goes this share of the way on
-#: to ``learn`` where the bone's own windows of the gap's length say that ``learn`` loses (by
-#: 10 % + 2 mm) no more than :data:`LEARN_TRUST` of them (hundreds per bone where the three
-#: copies of a gap are a noisy judge; docs/METHOD_NOTES.md, session 63)
-LEARN_PULL = 0.25
-LEARN_TRUST = 0.03
-#: how far ``mix`` goes from ``hermite`` towards ``match`` (tuned, docs/METHOD_NOTES.md)
-MIX_SHARE = 0.25
 AUTO_POSITIONS = ("knn", "half", "recall")
 #: the fills ``auto``'s ``stack`` weighs together frame by frame where the knowledge base holds
-#: bone rotations and the take has copies of its gaps, and how strongly its weights are drawn
-#: towards equal ones (tuned, docs/METHOD_NOTES.md)
+#: bone rotations and the take has copies of its gaps (``stack_ridge``)
 STACK_FILLS = ("interp", "hermite", "match", "regress")
-STACK_RIDGE = 0.3
-#: gaps of this many seconds or more for which no candidate passes on the copies take
-#: ``stack_long`` rather than ``interp``: :data:`LONG_STACK_FILLS` weighed together like
-#: ``stack`` (``regress_pose``: ``regress`` on the other bones' pose at the frame alone;
-#: ``regress_kernel``: ``regress`` with a Gaussian kernel beside the linear one); in a
-#: take without copies, those of its long gaps that other bones' gaps overlap, in equal parts
-#: (tuned, docs/METHOD_NOTES.md)
-LONG_STACK = 0.75
 LONG_STACK_FILLS = STACK_FILLS + ("regress_pose", "regress_kernel")
-#: a gap of :data:`LONG_STACK` seconds or more that does not keep the interpolation goes this
-#: share of the way from its fill to the mean of :data:`CONSENSUS_FILLS`: the knowledge base's
-#: motion and the take's own regression, estimates that owe each other and the copies' choice
-#: little (chosen on non-test takes, docs/METHOD_NOTES.md, session 35)
-CONSENSUS = 0.5
 CONSENSUS_FILLS = ("match", "regress_kernel")
-#: a gap at a clip's end (one key: Blender holds it) where those two agree - lie apart by less
-#: than :data:`CORROBORATED` times their mean departure from the held key (RMS over the joints
-#: the bone moves) - goes this share of the way on from its fill (and its consensus) to their
-#: mean: its copies, with keys at both ends, judge its fills against an interpolation far
-#: stronger than the held key, and two estimates from different evidence that bear each other
-#: out say what the key lacks (:meth:`_Job._ends_agreed`; chosen by leave-one-subject-out on
-#: non-test takes, docs/METHOD_NOTES.md, session 68)
-ENDS_SHARE = 1.0
-#: last, each gap with keys at both ends takes, of its fill and these (each filling the take's
-#: gaps alone), the one that lies nearest the others (the least summed RMS distance over the
-#: joints its bone moves): fills from different evidence fail on different gaps, and the one
-#: the others bear out is the one least likely to have failed (:meth:`_Job._medoid`; chosen on
-#: non-test takes, docs/METHOD_NOTES.md, session 69), in a take with copies of its gaps
-MEDOID_FILLS = ("match", "regress", "learn")
-#: in a take with copies, a gap from :data:`LEARN_SECONDS` up to ``MID_LEARN_SECONDS`` with keys
-#: beyond its keys (too long for ``learn`` to be judged) goes this share of the way on from its
-#: fill to ``learn``, the bone's own interpolator: alone it carries the keys' motion too far at
-#: that length, a part of it steadies whatever the copies chose (chosen on non-test takes,
-#: docs/METHOD_NOTES.md, session 64: at 0.67 s it lost gaps, at 1 s it did not pay)
-MID_LEARN = 0.2
-MID_LEARN_SECONDS = 0.6
-#: where the take has copies, every gap shorter than :data:`LONG_STACK` goes from ``interp``
-#: towards the chosen fill only as far as the stacked fills agree on the gap
-#: (:meth:`_Job._doubted`): the weight of their spread against the departure from ``interp``
-#: (tuned, docs/METHOD_NOTES.md; ``stack_long`` went undoubted in session 26)
-AUTO_DOUBT = 0.1
-#: and then only as far as its departure from ``interp`` stands out of the fill's own error on
-#: the gap's copies: the share is cut by ``max(0, 1 - AUTO_WARY * E / A)``, ``E`` the fill's
-#: mean squared joint error expected from the copies, ``A`` the gap's squared departure (a
-#: shrinkage towards the interpolation; chosen on non-test takes, docs/METHOD_NOTES.md,
-#: session 50)
-AUTO_WARY = 0.1
-#: then the part of the interpolation such a gap keeps (``1 - share``) goes this share of the way
-#: on to the mean of the two stacked fills (those of :data:`STACK_FILLS` but ``interp``) that agree
-#: on the gap - lie apart by less than :data:`CORROBORATED` times their mean departure from the
-#: interpolation, the closest such pair: two estimates from different evidence (the keys' motion,
-#: the rest of the body, the knowledge base) that bear each other out (:meth:`_Job._corroborated`;
-#: chosen on non-test takes, docs/METHOD_NOTES.md, session 57)
-CORROBORATE = 0.5
-CORROBORATED = 0.45
-#: on a gap where ``learn`` is judged (under :data:`LEARN_SECONDS`, keys beyond its keys),
-#: ``learn`` - how the bone's own motion and the bones about it go on over the gap - may be one
-#: of that pair; a pair with it moves the kept part this share of the way instead (half of the
-#: way lost gaps on the held-back takes; chosen on non-test takes, docs/METHOD_NOTES.md,
-#: session 66)
-CORROBORATE_LEARN = 0.42
-#: and where the take's copies, all of them together, favour the cubic (``hermite``) over the
-#: interpolation - their mean log ratio of its squared joint error to the interpolation's lies
-#: below ``-CUBIC_TRUST`` - the part such a gap kept goes ``min(CUBIC_PULL, -mean -
-#: CUBIC_TRUST)`` of the way on to the cubic: a gap's own few copies judge it against the bar
-#: of :data:`PROMOTE_SHORT`, the take's hundreds tell whether its motion suits the cubic at all
-#: (chosen on non-test takes, docs/METHOD_NOTES.md, session 58)
-CUBIC_TRUST = 0.5
-CUBIC_PULL = 0.5
-#: ``regress``: the other bones' channels this many seconds either side count too; fitted within
-#: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
-REGRESS_LAGS = (0.05, 0.1)
-REGRESS_WINDOW = 3.0
-REGRESS_RIDGE = 0.1
 #: the methods that take a knowledge base, and those that cannot fill without one (``auto``
 #: fills from the take alone: :data:`TAKE_ALONE_CANDIDATES`)
 USES_KB = ("auto", "knn", "match", "positions")
@@ -216,74 +131,164 @@ KB_FILLS = ("knn", "half", "recall", "match", "mix")
 #: docs/METHOD_NOTES.md, session 37)
 TAKE_ALONE_CANDIDATES = ("hermite", "regress", "regress_kernel", "learn")
 TAKE_ALONE_CONSENSUS = ("regress_kernel",)
-#: in a take too short for copies, without a knowledge base, a gap of :data:`LONG_GAP` seconds
-#: or more goes this share of the way from ``interp`` to ``regress_kernel`` (a shorter one takes
-#: ``hermite``): unjudged, so part of the way (chosen on 1.5 s cuts of non-test takes,
-#: docs/METHOD_NOTES.md, session 37)
-TAKE_ALONE_UNJUDGED = 0.5
 TAKE_ALONE = ("auto fills from the take alone (its own regression, a cubic and Blender's "
               "interpolation, judged on copies of the gaps)")
-#: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
-#: of interpolation's (the better candidate where both are), on gaps of :data:`LONG_GAP`
-#: seconds or more and on shorter ones, where interpolation is hard to beat: part of the way
-#: there below ``PROMOTE_SHORT``, all the way only below ``PROMOTE_SHORT_WHOLE`` (tuned on
-#: non-test subjects, docs/METHOD_NOTES.md)
-PROMOTE = 0.9
-PROMOTE_SHORT = 0.7
-PROMOTE_SHORT_WHOLE = 0.3
-#: weight (in copies) of the take's mean over all copies in each gap's score
-SHRINK = 1.0
-#: how far ``auto`` may go from ``interp`` towards the chosen candidate: per gap the share
-#: whose blend refills the gap's copies best
-AUTO_SHARES = (0.25, 0.5, 0.75, 1.0)
-#: gaps of this many seconds or more are long (above)
-LONG_GAP = 0.5
-#: in a take without copies, a long gap that ``match`` fills unjudged goes this share of the way
-#: on to the mean of :data:`CONSENSUS_FILLS` (1: the mean itself; chosen on non-test takes,
-#: docs/METHOD_NOTES.md, session 47)
-UNJUDGED_CONSENSUS = 1.0
-#: in a take without copies, a long gap keeps the interpolation where it and ``regress`` lie
-#: within this share of ``match``'s distance from the nearer of them (RMS over the joints the
-#: gap moves; :meth:`_Job._outvoted`; chosen on non-test takes, docs/METHOD_NOTES.md)
-OUTVOTED = 0.5
-#: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
-AUTO_COPIES = 3
-#: a gap of this many seconds or more that fewer than :data:`AUTO_COPIES` copies of its own fit
-#: takes ``stack_long``: the take's other copies do not speak for it (chosen on non-test
-#: takes, docs/METHOD_NOTES.md)
-FEW_COPIES = 1.5
-COPY_MARGIN = 10
-#: ``hermite`` carries the velocities at a gap's ends as if the gap lasted at most this long
-HERMITE_SECONDS = 0.5
-#: ``learn``, the take's own interpolator (:func:`~.rig.learned_rotations`): keys beyond each
-#: gap's keys it reads, and its ridge (none: the bone's own windows, hundreds of them, pin its
-#: few weights; docs/METHOD_NOTES.md, session 61)
-LEARN_KEYS = 4
-LEARN_RIDGE = 0.0
-#: ``learn``'s bones that tell of a gapped one: those within this many joints of it; the ridges
-#: (shares of the mean diagonal) of what their own fits miss, the one that predicts each half of
-#: the take's windows best from the other (docs/METHOD_NOTES.md, session 62)
-LEARN_HOPS = 2
-LEARN_BODY_RIDGES = (0.1, 0.3, 1.0)
-#: how fast (m/s) the interpolation of a gap is taken to drift from the truth, per second to
-#: the nearest key: how far ``knn`` lets the knowledge base move a joint (tuned, METHOD_NOTES)
-GUESS_SPEED = 0.1
-#: weight of the current (interpolated) rotation in each gapped bone's fit, as a share of the
-#: fitted joints' spread about the bone's head (pseudo-points; tuned, docs/METHOD_NOTES.md)
-STAY = 0.5
-#: seconds of context either side of a gap that ``match`` compares, and how much the gapped
-#: bones count there against any other bone
-MATCH_CONTEXT = 0.5
-MATCH_CONTEXT_WEIGHT = 4.0
-#: seconds of the pieces ``match`` matches a stretch in, where one bone is gapped there and
-#: where several are (tuned, docs/METHOD_NOTES.md)
-MATCH_PIECE = 0.5
-MATCH_PIECE_MANY = 1.0
-MATCH_OWN = True
-MATCH_DAMP = True
-#: the windows' mean leans to a window that stands out (:func:`~.matching.match_windows`'
-#: ``lean``; session 77, docs/METHOD_NOTES.md)
-MATCH_LEAN = True
+
+
+@dataclass(frozen=True)
+class BoneConfig:
+    """What ``auto`` (and the fills it weighs) of the rotation fill go by; ``fill_bones(...,
+    config=BoneConfig(...))``. The defaults were chosen on takes that are not test takes."""
+
+    #: ``auto`` judges ``learn`` only on gaps shorter than this (seconds) with keys either side (the
+    #: bone's own interpolator gains on gaps of 0.125-0.25 s and loses from 0.5 s on the non-test
+    #: takes; at a clip's end it holds the key; docs/METHOD_NOTES.md, session 61)
+    learn_seconds: float = 0.4
+    #: the part of such a gap that ``auto`` keeps of the interpolation goes this share of the way on
+    #: to ``learn`` where the bone's own windows of the gap's length say that ``learn`` loses (by 10
+    #: % + 2 mm) no more than ``learn_trust`` of them (hundreds per bone where the three copies of a
+    #: gap are a noisy judge; docs/METHOD_NOTES.md, session 63)
+    learn_pull: float = 0.25
+    learn_trust: float = 0.03
+    #: how far ``mix`` goes from ``hermite`` towards ``match`` (tuned, docs/METHOD_NOTES.md)
+    mix_share: float = 0.25
+    stack_ridge: float = 0.3
+    #: gaps of this many seconds or more for which no candidate passes on the copies take
+    #: ``stack_long`` rather than ``interp``: :data:`LONG_STACK_FILLS` weighed together like
+    #: ``stack`` (``regress_pose``: ``regress`` on the other bones' pose at the frame alone;
+    #: ``regress_kernel``: ``regress`` with a Gaussian kernel beside the linear one); in a take
+    #: without copies, those of its long gaps that other bones' gaps overlap, in equal parts (tuned,
+    #: docs/METHOD_NOTES.md)
+    long_stack: float = 0.75
+    #: a gap of ``long_stack`` seconds or more that does not keep the interpolation goes this share
+    #: of the way from its fill to the mean of :data:`CONSENSUS_FILLS`: the knowledge base's motion
+    #: and the take's own regression, estimates that owe each other and the copies' choice little
+    #: (chosen on non-test takes, docs/METHOD_NOTES.md, session 35)
+    consensus: float = 0.5
+    #: a gap at a clip's end (one key: Blender holds it) where those two agree - lie apart by less
+    #: than ``corroborated`` times their mean departure from the held key (RMS over the joints the
+    #: bone moves) - goes this share of the way on from its fill (and its consensus) to their mean:
+    #: its copies, with keys at both ends, judge its fills against an interpolation far stronger
+    #: than the held key, and two estimates from different evidence that bear each other out say
+    #: what the key lacks (:meth:`_Job._ends_agreed`; chosen by leave-one-subject-out on non-test
+    #: takes, docs/METHOD_NOTES.md, session 68)
+    ends_share: float = 1.0
+    #: last, each gap with keys at both ends takes, of its fill and these (each filling the take's
+    #: gaps alone), the one that lies nearest the others (the least summed RMS distance over the
+    #: joints its bone moves): fills from different evidence fail on different gaps, and the one the
+    #: others bear out is the one least likely to have failed (:meth:`_Job._medoid`; chosen on
+    #: non-test takes, docs/METHOD_NOTES.md, session 69), in a take with copies of its gaps
+    medoid_fills: tuple = ("match", "regress", "learn")
+    #: in a take with copies, a gap from ``learn_seconds`` up to ``mid_learn_seconds`` with keys
+    #: beyond its keys (too long for ``learn`` to be judged) goes this share of the way on from its
+    #: fill to ``learn``, the bone's own interpolator: alone it carries the keys' motion too far at
+    #: that length, a part of it steadies whatever the copies chose (chosen on non-test takes,
+    #: docs/METHOD_NOTES.md, session 64: at 0.67 s it lost gaps, at 1 s it did not pay)
+    mid_learn: float = 0.2
+    mid_learn_seconds: float = 0.6
+    #: where the take has copies, every gap shorter than ``long_stack`` goes from ``interp`` towards
+    #: the chosen fill only as far as the stacked fills agree on the gap (:meth:`_Job._doubted`):
+    #: the weight of their spread against the departure from ``interp`` (tuned,
+    #: docs/METHOD_NOTES.md; ``stack_long`` went undoubted in session 26)
+    auto_doubt: float = 0.1
+    #: and then only as far as its departure from ``interp`` stands out of the fill's own error on
+    #: the gap's copies: the share is cut by ``max(0, 1 - auto_wary * E / A)``, ``E`` the fill's
+    #: mean squared joint error expected from the copies, ``A`` the gap's squared departure (a
+    #: shrinkage towards the interpolation; chosen on non-test takes, docs/METHOD_NOTES.md, session
+    #: 50)
+    auto_wary: float = 0.1
+    #: then the part of the interpolation such a gap keeps (``1 - share``) goes this share of the
+    #: way on to the mean of the two stacked fills (those of :data:`STACK_FILLS` but ``interp``)
+    #: that agree on the gap - lie apart by less than ``corroborated`` times their mean departure
+    #: from the interpolation, the closest such pair: two estimates from different evidence (the
+    #: keys' motion, the rest of the body, the knowledge base) that bear each other out
+    #: (:meth:`_Job._corroborated`; chosen on non-test takes, docs/METHOD_NOTES.md, session 57)
+    corroborate: float = 0.5
+    corroborated: float = 0.45
+    #: on a gap where ``learn`` is judged (under ``learn_seconds``, keys beyond its keys), ``learn``
+    #: - how the bone's own motion and the bones about it go on over the gap - may be one of that
+    #: pair; a pair with it moves the kept part this share of the way instead (half of the way lost
+    #: gaps on the held-back takes; chosen on non-test takes, docs/METHOD_NOTES.md, session 66)
+    corroborate_learn: float = 0.42
+    #: and where the take's copies, all of them together, favour the cubic (``hermite``) over the
+    #: interpolation - their mean log ratio of its squared joint error to the interpolation's lies
+    #: below ``-cubic_trust`` - the part such a gap kept goes ``min(cubic_pull, -mean -
+    #: cubic_trust)`` of the way on to the cubic: a gap's own few copies judge it against the bar of
+    #: ``promote_short``, the take's hundreds tell whether its motion suits the cubic at all (chosen
+    #: on non-test takes, docs/METHOD_NOTES.md, session 58)
+    cubic_trust: float = 0.5
+    cubic_pull: float = 0.5
+    #: ``regress``: the other bones' channels this many seconds either side count too; fitted within
+    #: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
+    regress_lags: tuple = (0.05, 0.1)
+    regress_window: float = 3.0
+    regress_ridge: float = 0.1
+    #: in a take too short for copies, without a knowledge base, a gap of ``long_gap`` seconds or
+    #: more goes this share of the way from ``interp`` to ``regress_kernel`` (a shorter one takes
+    #: ``hermite``): unjudged, so part of the way (chosen on 1.5 s cuts of non-test takes,
+    #: docs/METHOD_NOTES.md, session 37)
+    take_alone_unjudged: float = 0.5
+    #: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
+    #: of interpolation's (the better candidate where both are), on gaps of ``long_gap`` seconds or
+    #: more and on shorter ones, where interpolation is hard to beat: part of the way there below
+    #: ``promote_short``, all the way only below ``promote_short_whole`` (tuned on non-test
+    #: subjects, docs/METHOD_NOTES.md)
+    promote: float = 0.9
+    promote_short: float = 0.7
+    promote_short_whole: float = 0.3
+    #: weight (in copies) of the take's mean over all copies in each gap's score
+    shrink: float = 1.0
+    #: how far ``auto`` may go from ``interp`` towards the chosen candidate: per gap the share whose
+    #: blend refills the gap's copies best
+    auto_shares: tuple = (0.25, 0.5, 0.75, 1.0)
+    #: gaps of this many seconds or more are long (above)
+    long_gap: float = 0.5
+    #: in a take without copies, a long gap that ``match`` fills unjudged goes this share of the way
+    #: on to the mean of :data:`CONSENSUS_FILLS` (1: the mean itself; chosen on non-test takes,
+    #: docs/METHOD_NOTES.md, session 47)
+    unjudged_consensus: float = 1.0
+    #: in a take without copies, a long gap keeps the interpolation where it and ``regress`` lie
+    #: within this share of ``match``'s distance from the nearer of them (RMS over the joints the
+    #: gap moves; :meth:`_Job._outvoted`; chosen on non-test takes, docs/METHOD_NOTES.md)
+    outvoted: float = 0.5
+    #: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
+    auto_copies: int = 3
+    #: a gap of this many seconds or more that fewer than ``auto_copies`` copies of its own fit
+    #: takes ``stack_long``: the take's other copies do not speak for it (chosen on non-test takes,
+    #: docs/METHOD_NOTES.md)
+    few_copies: float = 1.5
+    copy_margin: int = 10
+    #: ``hermite`` carries the velocities at a gap's ends as if the gap lasted at most this long
+    hermite_seconds: float = 0.5
+    #: ``learn``, the take's own interpolator (:func:`~.rig.learned_rotations`): keys beyond each
+    #: gap's keys it reads, and its ridge (none: the bone's own windows, hundreds of them, pin its
+    #: few weights; docs/METHOD_NOTES.md, session 61)
+    learn_keys: int = 4
+    learn_ridge: float = 0.0
+    #: ``learn``'s bones that tell of a gapped one: those within this many joints of it; the ridges
+    #: (shares of the mean diagonal) of what their own fits miss, the one that predicts each half of
+    #: the take's windows best from the other (docs/METHOD_NOTES.md, session 62)
+    learn_hops: int = 2
+    learn_body_ridges: tuple = (0.1, 0.3, 1.0)
+    #: how fast (m/s) the interpolation of a gap is taken to drift from the truth, per second to the
+    #: nearest key: how far ``knn`` lets the knowledge base move a joint (tuned, METHOD_NOTES)
+    guess_speed: float = 0.1
+    #: weight of the current (interpolated) rotation in each gapped bone's fit, as a share of the
+    #: fitted joints' spread about the bone's head (pseudo-points; tuned, docs/METHOD_NOTES.md)
+    stay: float = 0.5
+    #: seconds of context either side of a gap that ``match`` compares, and how much the gapped
+    #: bones count there against any other bone
+    match_context: float = 0.5
+    match_context_weight: float = 4.0
+    #: seconds of the pieces ``match`` matches a stretch in, where one bone is gapped there and
+    #: where several are (tuned, docs/METHOD_NOTES.md)
+    match_piece: float = 0.5
+    match_piece_many: float = 1.0
+    match_own: bool = True
+    match_damp: bool = True
+    #: the windows' mean leans to a window that stands out (:func:`~.matching.match_windows`'
+    #: ``lean``; session 77, docs/METHOD_NOTES.md)
+    match_lean: bool = True
 
 
 @dataclass(frozen=True)
@@ -300,14 +305,14 @@ class GapChoice:
     copies judged the gap; ``consensus``: how far the fill then went on towards the mean of
     the fills named in ``towards`` (0: not at all; :data:`CONSENSUS_FILLS`, without a
     knowledge base :data:`TAKE_ALONE_CONSENSUS`, joined by " + "; at a clip end where those two
-    agree, :data:`ENDS_SHARE` of the rest of the way too); ``corroborated``: the two
+    agree, ``ends_share`` of the rest of the way too); ``corroborated``: the two
     fills (joined by " + ") whose mean the part of a short gap kept of the interpolation went
-    :data:`CORROBORATE` (with ``learn``: :data:`CORROBORATE_LEARN`) of the way on to, where
+    ``corroborate`` (with ``learn``: ``corroborate_learn``) of the way on to, where
     they agree on the gap ("": none); ``cubic``: how
     far the gap went towards the cubic (``hermite``) beside, where the take's copies favour it
-    (:data:`CUBIC_TRUST`; 0: not at all); ``learnt``: how far it went towards ``learn``
-    beside, where the bone's own windows trust it (:data:`LEARN_TRUST`; 0: not at all);
-    ``medoid``: the fill of :data:`MEDOID_FILLS` that then took the gap's place, lying nearer
+    (``cubic_trust``; 0: not at all); ``learnt``: how far it went towards ``learn``
+    beside, where the bone's own windows trust it (``learn_trust``; 0: not at all);
+    ``medoid``: the fill of ``medoid_fills`` that then took the gap's place, lying nearer
     the other fills than all that went before ("": none did)."""
 
     bone: str
@@ -326,7 +331,7 @@ class GapChoice:
 
 def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves=None,
                to_metres=None, settings=None, progress=None, should_cancel=None, report=None,
-               return_choices=False, trace=None):
+               return_choices=False, trace=None, config=None):
     """Fill the rotation gaps of an armature take.
 
     Parameters
@@ -350,10 +355,9 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
         Bones whose location is animated (default: roots).
     to_metres : ndarray, shape (4, 4), optional
         Armature space -> world metres, Z up (default: identity).
-    settings : KnnSettings, optional
+    settings, config : KnnSettings, BoneConfig, optional
     report, trace : callable, optional
-        ``report(message)``: what the user is told; ``trace``: what each of ``auto``'s stages
-        did (``--verbose``).
+        What the user is told; what each of ``auto``'s stages did (``--verbose``).
     return_choices : bool
         Also return how each gap was filled (:mod:`.explain` says it in words).
 
@@ -384,7 +388,7 @@ def fill_bones(rig, channels, location, gaps, fps, kb=None, method="auto", moves
     moves = rig.roots if moves is None else np.asarray(moves, dtype=bool)
     job = _Job(rig, fps, kb, moves, np.eye(4) if to_metres is None else np.asarray(to_metres),
                settings, progress or (lambda fraction, message: None), should_cancel,
-               report or (lambda message: None), trace)
+               report or (lambda message: None), trace, config)
     seen = basis_matrices(rig, channels, location)
     if method == "interp" or not gaps.any():
         basis = seen
@@ -430,8 +434,9 @@ class _Job:
     """One fill: the rig, the knowledge base and the callbacks its steps share."""
 
     def __init__(self, rig, fps, kb, moves, to_metres, settings, progress, should_cancel,
-                 report, trace=None):
+                 report, trace=None, config=None):
         self.rig, self.fps, self.kb, self.moves = rig, fps, kb, moves
+        self.cfg = config or BoneConfig()
         self.to_metres = to_metres
         self.settings = settings
         self.progress, self.should_cancel, self.report = progress, should_cancel, report
@@ -457,9 +462,9 @@ class _Job:
         return self.below[b] | (self.own & (np.arange(len(self.own)) == b))
 
     def short(self, a, e):
-        """Whether a gap over frames ``a``-``e`` is shorter than :data:`LONG_STACK` seconds:
+        """Whether a gap over frames ``a``-``e`` is shorter than ``long_stack`` seconds:
         ``auto`` doubts, corroborates and pulls such gaps; longer ones it stacks."""
-        return e - a + 1 < LONG_STACK * self.fps
+        return e - a + 1 < self.cfg.long_stack * self.fps
 
     def unknown(self, gaps):
         """(frames, joints) joints the gaps leave unknown."""
@@ -489,7 +494,7 @@ class _Job:
 
     def refine(self, basis, gaps):
         """The local models' most likely joints near what the F-curves show: each joint a gap
-        leaves unknown is trusted to within ``GUESS_SPEED`` times its time to the nearest end of
+        leaves unknown is trusted to within ``guess_speed`` times its time to the nearest end of
         its gap (:func:`~.models.soft_poses`); armature space, NaN where known."""
         from .models import KnnSettings, soft_poses
 
@@ -502,7 +507,7 @@ class _Job:
             away = stacking.from_keys(e - a + 1) / self.fps
             joints = self.moved_by(b)
             doubt[a:e + 1, joints] = np.maximum(doubt[a:e + 1, joints],
-                                                GUESS_SPEED * away[:, None])
+                                                self.cfg.guess_speed * away[:, None])
         # also model a frame either side of each gap: the model's offset from the keys there
         # is blended across the gap (its bias, not the shape it gives the gap)
         around = widened(unknown)
@@ -544,7 +549,7 @@ class _Job:
     def knn(self, basis, gaps):
         """Gapped bones carried onto the local models' joints near ``basis``."""
         return carry_subtrees(self.rig, basis, gaps, self.refine(basis, gaps), self.moves,
-                              self.below)
+                              self.below, self.cfg.stay)
 
     def match(self, basis, gaps):
         """Gapped bones turned as the knowledge-base windows that move most like the take around
@@ -552,6 +557,7 @@ class _Job:
         rotation of each gapped bone, times an offset slerped across the gap from what it takes
         to meet the keys at either end. Needs a knowledge base with bone rotations; bones it
         lacks keep ``basis``."""
+        cfg = self.cfg
         from .matching import match_windows, pose_table, take_as_source
 
         kb, rig = self.kb, self.rig
@@ -572,7 +578,7 @@ class _Job:
                 ..., :2].reshape(len(kb_turns), len(bones), 6).astype(np.float32)
             self._kb_features = kb_features, pose_table(kb_features)
         kb_features, table = self._kb_features
-        margin = int(round(MATCH_CONTEXT * self.fps))
+        margin = int(round(cfg.match_context * self.fps))
         frames = len(gaps)
         busy = [(a, e) for _, a, e in gap_runs(gap.any(axis=1)[:, None])]
         stretches = [(max(0, a - margin), min(frames - 1, e + margin)) for a, e in busy]
@@ -580,10 +586,10 @@ class _Job:
         near = np.zeros_like(gap)
         for lo, hi in stretches:
             near[lo:hi + 1] = gap[lo:hi + 1].any(axis=0)
-        weight[near & ~gap] = MATCH_CONTEXT_WEIGHT
+        weight[near & ~gap] = cfg.match_context_weight
         # the take itself wherever it keys the bones gapped in a stretch (not counting its
         # context; other gapped bones as Blender interpolates them): the same subject and style
-        if MATCH_OWN:
+        if cfg.match_own:
             own, source, hidden = take_as_source(features, gap, self.fps, kb.fps,
                                                  kb.source_index)
             kb_features = np.concatenate([kb_features, own])
@@ -593,9 +599,9 @@ class _Job:
         # matched in pieces: short ones where one bone is gapped (the rest of the body says
         # much), longer ones where several are
         predicted, before = [None] * len(stretches), 0
-        for width in (MATCH_PIECE, MATCH_PIECE_MANY):
+        for width in (cfg.match_piece, cfg.match_piece_many):
             chosen = [i for i, (lo, hi) in enumerate(stretches)
-                      if (gap[lo:hi + 1].any(axis=0).sum() == 1) == (width == MATCH_PIECE)]
+                      if (gap[lo:hi + 1].any(axis=0).sum() == 1) == (width == cfg.match_piece)]
 
             def on_stretch(done, before=before):
                 if self.should_cancel and self.should_cancel():
@@ -604,7 +610,7 @@ class _Job:
             found = match_windows(features, weight, kb_features, source, self.fps, kb.fps,
                                   [stretches[i] for i in chosen], width=width,
                                   on_stretch=on_stretch, kb_hidden=hidden, table=table,
-                                  lean=MATCH_LEAN,
+                                  lean=cfg.match_lean,
                                   needs=[gap[busy[i][0]:busy[i][1] + 1].any(axis=0)
                                          for i in chosen])
             before += len(chosen)
@@ -625,7 +631,7 @@ class _Job:
                 shape = pred[a - lo:e - lo + 1, i]
                 if len(ends) == 2:
                     offset = Slerp(ends, offsets)(span).as_matrix()
-                    if MATCH_DAMP:
+                    if cfg.match_damp:
                         shape = _damped(shape, pred[:, i], turns[lo:hi + 1, i],
                                         ~gap[lo:hi + 1, i], a - lo, e - lo)
                 else:
@@ -658,7 +664,7 @@ class _Job:
         rotation channel a cubic of its own, as a cubic on Blender's F-curves would do it
         (the baseline, which near gimbal lock swings a bone by radians)."""
         moving = gaps & self.moves
-        damping = HERMITE_SECONDS * self.fps
+        damping = self.cfg.hermite_seconds * self.fps
         rotation = hermite_channels(channels, gaps, damping) if on_channels else channels
         out = basis_matrices(self.rig, rotation, hermite_channels(location, moving, damping),
                              base, gaps.any(axis=0))
@@ -671,17 +677,20 @@ class _Job:
         rotation (of those in ``fill``, default all) as the bone's own motion goes on from the
         keys, and as the motion of the bones about it says (:func:`~.rig.learned_rotations`)."""
         out = np.array(base, dtype=float)
-        out[..., :3, :3] = learned_rotations(out[..., :3, :3], gaps, LEARN_KEYS, LEARN_RIDGE,
-                                             self.rig.near(LEARN_HOPS), LEARN_BODY_RIDGES,
-                                             fill=fill)
+        cfg = self.cfg
+        out[..., :3, :3] = learned_rotations(out[..., :3, :3], gaps, cfg.learn_keys,
+                                             cfg.learn_ridge, self.rig.near(cfg.learn_hops),
+                                             cfg.learn_body_ridges, fill=fill)
         return out
 
-    def regress(self, channels, location, gaps, base, lags=REGRESS_LAGS, kernel=False):
-        """Each gapped bone (not a root) as the rest of the body says (``regress``; with
-        ``lags=()`` the body's pose at the frame alone, ``regress_pose``; with ``kernel``,
-        ``regress_kernel``)."""
+    def regress(self, channels, location, gaps, base, lags=None, kernel=False):
+        """Each gapped bone (not a root) as the rest of the body says (``regress``, with the
+        configured lags; with ``lags=()`` the body's pose at the frame alone, ``regress_pose``;
+        with ``kernel``, ``regress_kernel``)."""
+        cfg = self.cfg
         return basis_matrices(self.rig, regress_channels(
-            channels, gaps, self.fps, lags, REGRESS_WINDOW, REGRESS_RIDGE,
+            channels, gaps, self.fps, cfg.regress_lags if lags is None else lags,
+            cfg.regress_window, cfg.regress_ridge,
             fixed=self.rig.roots, kernel=kernel), location, base, gaps.any(axis=0))
 
     def candidates(self, channels, location, gaps, names, base, learn_on=None):
@@ -709,7 +718,7 @@ class _Job:
         if {"match", "mix"} & set(names) and self.kb is not None and self.kb.turns is not None:
             out["match"] = self.match(out["interp"], fillable)
             if "mix" in names:
-                out["mix"] = halfway(out["hermite"], out["match"], gaps, MIX_SHARE)
+                out["mix"] = halfway(out["hermite"], out["match"], gaps, self.cfg.mix_share)
         if "recall" in names:
             out["recall"] = carry_subtrees(self.rig, out["interp"], fillable,
                                            self.predict(out["interp"], fillable), self.moves,
@@ -718,40 +727,41 @@ class _Job:
 
     def auto(self, channels, location, gaps, seen):
         """Per gap, the candidate (:data:`AUTO_CANDIDATES` and ``stack``, ``learn`` on gaps
-        under :data:`LEARN_SECONDS` only, or
+        under ``learn_seconds`` only, or
         :data:`AUTO_POSITIONS` where the knowledge base holds no bone rotations) and the share
         of the way to it from
-        interpolation (:data:`AUTO_SHARES`) that refill copies of the gap - same bone, same
-        length, where the bone is keyed - best, if they do so below :data:`PROMOTE` of
-        interpolation's error (short gaps: :data:`PROMOTE_SHORT`, all the way only below
-        :data:`PROMOTE_SHORT_WHOLE`); interpolation otherwise, or ``stack_long`` on gaps of
-        :data:`LONG_STACK` seconds or more (and on gaps of :data:`FEW_COPIES` seconds or more
-        with fewer than :data:`AUTO_COPIES` copies of their own); the share of any gap shorter
-        than :data:`LONG_STACK` cut where the fills disagree on the gap (:meth:`_doubted`).
+        interpolation (``auto_shares``) that refill copies of the gap - same bone, same
+        length, where the bone is keyed - best, if they do so below ``promote`` of
+        interpolation's error (short gaps: ``promote_short``, all the way only below
+        ``promote_short_whole``); interpolation otherwise, or ``stack_long`` on gaps of
+        ``long_stack`` seconds or more (and on gaps of ``few_copies`` seconds or more
+        with fewer than ``auto_copies`` copies of their own); the share of any gap shorter
+        than ``long_stack`` cut where the fills disagree on the gap (:meth:`_doubted`).
         A gap without copies is
         scored on the take's copies of other gaps; a take without any takes ``match`` on gaps
-        of :data:`LONG_GAP` seconds or more and ``mix`` on shorter ones (``half`` on all), but
-        ``stack_long`` in equal parts on gaps of :data:`LONG_STACK` seconds or more
+        of ``long_gap`` seconds or more and ``mix`` on shorter ones (``half`` on all), but
+        ``stack_long`` in equal parts on gaps of ``long_stack`` seconds or more
         that gaps of other bones overlap (``match`` sees less of the body there), and
         interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`); where
-        all the take's copies together favour the cubic (:data:`CUBIC_TRUST`), the part a
+        all the take's copies together favour the cubic (``cubic_trust``), the part a
         short gap kept of the interpolation goes part of the way on to ``hermite``, and
-        :data:`LEARN_PULL` of it on to ``learn`` where ``learn`` is judged and the bone's own
-        windows of the gap's length trust it (:data:`LEARN_TRUST`); a gap from
-        :data:`LEARN_SECONDS` up to :data:`MID_LEARN_SECONDS` with keys beyond its keys, in a
-        take with copies, goes :data:`MID_LEARN` of the way on from its fill to ``learn``. Last,
-        each gap of :data:`LONG_STACK` seconds or more (where ``stack_long`` is made) that
-        does not keep the interpolation goes :data:`CONSENSUS` of the way on from its fill to
+        ``learn_pull`` of it on to ``learn`` where ``learn`` is judged and the bone's own
+        windows of the gap's length trust it (``learn_trust``); a gap from
+        ``learn_seconds`` up to ``mid_learn_seconds`` with keys beyond its keys, in a
+        take with copies, goes ``mid_learn`` of the way on from its fill to ``learn``. Last,
+        each gap of ``long_stack`` seconds or more (where ``stack_long`` is made) that
+        does not keep the interpolation goes ``consensus`` of the way on from its fill to
         the mean of :data:`CONSENSUS_FILLS`, and in a take without copies every other gap of
-        :data:`LONG_GAP` seconds or more that does not keep it :data:`UNJUDGED_CONSENSUS` of
+        ``long_gap`` seconds or more that does not keep it ``unjudged_consensus`` of
         the way (``match`` is unjudged there); a gap at a clip end where the two fills of
         :data:`CONSENSUS_FILLS`, each filling the take's gaps alone, agree
-        (:meth:`_ends_agreed`) goes :data:`ENDS_SHARE` of the rest of the way on to their
+        (:meth:`_ends_agreed`) goes ``ends_share`` of the rest of the way on to their
         mean. Without a knowledge base the same from the take
         alone: :data:`TAKE_ALONE_CANDIDATES`, the stacks without the knowledge base's fills,
         the consensus :data:`TAKE_ALONE_CONSENSUS`; a take without copies takes ``hermite`` on
-        gaps shorter than :data:`LONG_GAP` and goes :data:`TAKE_ALONE_UNJUDGED` of the way to
+        gaps shorter than ``long_gap`` and goes ``take_alone_unjudged`` of the way to
         ``regress_kernel`` on longer ones."""
+        cfg = self.cfg
         alone = self.kb is None
         rotations = alone or self.kb.turns is not None
         if alone:
@@ -762,15 +772,15 @@ class _Job:
                         "with 'kb build' from BVH or ASF/AMC takes for the rotation fill")
         names = (TAKE_ALONE_CANDIDATES if alone else AUTO_CANDIDATES if rotations
                  else AUTO_POSITIONS)
-        copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
+        copies = gap_copies(gaps, cfg.auto_copies, cfg.copy_margin)
         stack = rotations and bool(copies)  # the weights come from the copies
         runs = gap_runs(gaps)
         if alone:  # nothing to judge by: the cubic on short gaps, part of the way to the
             # take's own regression on long ones
-            choice = [("hermite", 1.0) if (e - a + 1) < LONG_GAP * self.fps
-                      else ("regress_kernel", TAKE_ALONE_UNJUDGED) for _, a, e in runs]
+            choice = [("hermite", 1.0) if (e - a + 1) < cfg.long_gap * self.fps
+                      else ("regress_kernel", cfg.take_alone_unjudged) for _, a, e in runs]
         else:
-            choice = [(names[0] if rotations and (e - a + 1) >= LONG_GAP * self.fps
+            choice = [(names[0] if rotations and (e - a + 1) >= cfg.long_gap * self.fps
                        else names[1], 1.0) for _, a, e in runs]
         estimates = [float("nan")] * len(runs)
         expected = [float("nan")] * len(runs)  # the chosen fill's mean squared joint error
@@ -781,16 +791,16 @@ class _Job:
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
         # in a take without copies, a long gap match fills unjudged goes on to the consensus
-        unjudged = [rotations and not alone and not copies and (e - a + 1) >= LONG_GAP * self.fps
-                    for _, a, e in runs]
+        unjudged = [rotations and not alone and not copies
+                    and (e - a + 1) >= cfg.long_gap * self.fps for _, a, e in runs]
         # gaps a little too long for learn to be judged, with keys beyond their keys, go part
         # of the way on to it
-        learnable = set(learnable_runs(gaps, LEARN_KEYS))
+        learnable = set(learnable_runs(gaps, cfg.learn_keys))
         mid = [rotations and bool(copies) and (b, a, e) in learnable
-               and LEARN_SECONDS * self.fps <= e - a + 1 < MID_LEARN_SECONDS * self.fps
+               and cfg.learn_seconds * self.fps <= e - a + 1 < cfg.mid_learn_seconds * self.fps
                for b, a, e in runs]
         # gaps at a clip end, where the consensus fills may agree on what the held key lacks
-        ends = [rotations and not alone and ENDS_SHARE > 0
+        ends = [rotations and not alone and cfg.ends_share > 0
                 and stacking.keys_of(a, e, len(gaps)) != "both" for _, a, e in runs]
         fills = self.long_fills if any(longest) else self.stack_fills if stack else ()
         if any(unjudged):
@@ -807,13 +817,13 @@ class _Job:
             hidden_loc = np.where((probe & self.moves)[..., None],
                                   interpolate_channels(location, probe), location)
             # learn only where it is judged: short gaps with keys beyond their keys, and copies
-            learns = np.array([e - a + 1 < LEARN_SECONDS * self.fps and (b, a, e) in learnable
+            learns = np.array([e - a + 1 < cfg.learn_seconds * self.fps and (b, a, e) in learnable
                                for b, a, e in runs])
-            if LEARN_PULL and learns.any():  # how often learn loses the bone's windows
+            if cfg.learn_pull and learns.any():  # how often learn loses the bone's windows
                 losses = learn_losses(seen[..., :3, :3], channels, self.rig.modes, gaps,
-                                      self.rig.levers(), LEARN_KEYS, LEARN_RIDGE,
+                                      self.rig.levers(), cfg.learn_keys, cfg.learn_ridge,
                                       plus=0.002 / self.metre_scale())
-                trusted = [learns[i] and losses.get(run, 1.0) <= LEARN_TRUST
+                trusted = [learns[i] and losses.get(run, 1.0) <= cfg.learn_trust
                            for i, run in enumerate(runs)]
             judged = np.zeros_like(gaps)
             for i, b, start, length in copies:
@@ -835,27 +845,30 @@ class _Job:
             if stack:  # how far all the copies together favour the cubic
                 favour = -np.mean(np.log((self._errors(tried["hermite"], truth, copies) + floor)
                                          / (base + floor)))
-                pull = min(CUBIC_PULL, max(0.0, favour - CUBIC_TRUST))
+                pull = min(cfg.cubic_pull, max(0.0, favour - cfg.cubic_trust))
             owner = np.array([c[0] for c in copies])
             everywhere, learnt = np.ones(len(copies), bool), learns[owner]
             ratio = {}
             for name in names:
-                for share in AUTO_SHARES:
+                for share in cfg.auto_shares:
                     blend = halfway(tried["interp"], tried[name], gaps | probe, share)
                     ratio[name, share] = np.log((self._errors(blend, truth, copies) + floor)
                                                 / (base + floor))
             for i, (b, a, e) in enumerate(runs):
-                long = (e - a + 1) >= LONG_GAP * self.fps
+                long = (e - a + 1) >= cfg.long_gap * self.fps
                 own = owner == i
-                score = {key: (r[own].sum() + SHRINK * r[among].mean()) / (own.sum() + SHRINK)
+                score = {key: (r[own].sum() + cfg.shrink * r[among].mean())
+                         / (own.sum() + cfg.shrink)
                          for key, r in ratio.items()  # learn: among the copies it fills
                          for among in [learnt if key[0] == "learn" else everywhere]
                          if among.any() and (key[0] != "learn" or learns[i])}
                 passed = {key: value for key, value in score.items() if value < np.log(
-                    PROMOTE if long else PROMOTE_SHORT_WHOLE if key[1] == 1 else PROMOTE_SHORT)}
+                    cfg.promote if long else cfg.promote_short_whole if key[1] == 1
+                    else cfg.promote_short)}
                 choice[i] = (min(passed, key=passed.get) if passed else
                              ("stack_long", 1.0) if longest[i] else ("interp", 0.0))
-                if longest[i] and own.sum() < AUTO_COPIES and e - a + 1 >= FEW_COPIES * self.fps:
+                if (longest[i] and own.sum() < cfg.auto_copies
+                        and e - a + 1 >= cfg.few_copies * self.fps):
                     choice[i] = ("stack_long", 1.0)  # too few copies of its own to judge by
                 if choice[i] in score:  # as a ratio of RMS errors, not of squared ones
                     estimates[i] = float(np.exp(score[choice[i]] / 2))
@@ -870,7 +883,7 @@ class _Job:
         learn_mask = wanted.copy()  # learn fills these too; match's context is the gaps it fills
         for (b, a, e), middle in zip(runs, mid):
             learn_mask[a:e + 1, b] |= middle
-        paired = stack and CORROBORATE_LEARN > 0 and learns.any()
+        paired = stack and cfg.corroborate_learn > 0 and learns.any()
         with_learn = {"learn"} if any(trusted) or any(mid) or paired else set()
         if wanted.any():
             made = self.candidates(channels, location, wanted,
@@ -893,11 +906,11 @@ class _Job:
         # the fills as each fills the take's gaps alone: the pair at clip ends (neither is
         # judged there) and the medoid's voters on the gaps with two keys
         # (in a take with copies: where none fit, session 31's outvoting holds)
-        both = [rotations and not alone and bool(MEDOID_FILLS) and bool(copies)
+        both = [rotations and not alone and bool(cfg.medoid_fills) and bool(copies)
                 and not self.rig.roots[b] and stacking.keys_of(a, e, len(gaps)) == "both"
                 for b, a, e in runs]
         alone_names = ((self.consensus_fills if any(ends) else ())
-                       + (MEDOID_FILLS if any(both) else ()))
+                       + (cfg.medoid_fills if any(both) else ()))
         # (those made for every gap already, as each fills them alone, are the same)
         whole = np.array_equal(wanted, gaps)
         same = {name: made[name] for name in alone_names if whole and name in made
@@ -907,21 +920,21 @@ class _Job:
         agreed = self._ends_agreed(paired_ends, runs, ends)
         wanted = learn_mask
         towards = self.consensus_fills
-        agree = CONSENSUS if wanted.any() and set(towards) <= set(made) else 0.0
+        agree = cfg.consensus if wanted.any() and set(towards) <= set(made) else 0.0
         self.choices, self.estimates, self.corroborated = choice, estimates, corroborated
         self.cubic = [pull * (1 - share) if share < 1 and self.short(a, e) else 0.0
                       for (_, a, e), (_, share) in zip(runs, choice)]
-        self.learnt = [LEARN_PULL * (1 - share) if trust else 0.0
+        self.learnt = [cfg.learn_pull * (1 - share) if trust else 0.0
                        for trust, (_, share) in zip(trusted, choice)]
-        onward = [agree if last else UNJUDGED_CONSENSUS * bool(agree) if unjudged_gap else 0.0
+        onward = [agree if last else cfg.unjudged_consensus * bool(agree) if unjudged_gap else 0.0
                   for last, unjudged_gap in zip(longest, unjudged)]
-        self.consensus = [MID_LEARN if middle else on if name != "interp"
+        self.consensus = [cfg.mid_learn if middle else on if name != "interp"
                           and (share < 1 or set(towards) != {name}) else 0.0  # there already
                           for (name, share), on, middle in zip(choice, onward, mid)]
         self.towards = [("learn",) if middle else towards if on else ()
                         for on, middle in zip(self.consensus, mid)]
         for i in np.flatnonzero(agreed):  # on from the fill and its consensus, if any
-            self.consensus[i] = 1 - (1 - self.consensus[i]) * (1 - ENDS_SHARE)
+            self.consensus[i] = 1 - (1 - self.consensus[i]) * (1 - cfg.ends_share)
             self.towards[i] = self.consensus_fills
         counts, partly = {}, {}
         for name, share in choice:
@@ -941,15 +954,16 @@ class _Job:
             + (f" ({partly[name]} part of the way from the interpolation)" if partly[name] else "")
             for name, n in counts.items())
             + (f"; then {onwards}" if onwards else "")
-            + (f"; the interpolated part of {pairs} short gaps {CORROBORATE:.0%} of the way on to "
-               "two fills that agree there" + (f" ({CORROBORATE_LEARN:.0%} where one is learn)"
-                                               if with_pairs_of_learn else "") if pairs else "")
+            + (f"; the interpolated part of {pairs} short gaps {cfg.corroborate:.0%} of the way "
+               "on to two fills that agree there"
+               + (f" ({cfg.corroborate_learn:.0%} where one is learn)"
+                  if with_pairs_of_learn else "") if pairs else "")
             + (f"; the interpolated part of the short gaps {pull:.0%} of the way on to the cubic, "
                "which the take's copies favour" if any(self.cubic) else "")
             + (f"; the interpolated part of {sum(map(bool, self.learnt))} short gaps "
-               f"{LEARN_PULL:.0%} of the way on to learn, which the bone's own windows trust"
+               f"{cfg.learn_pull:.0%} of the way on to learn, which the bone's own windows trust"
                if any(self.learnt) else "")
-            + (f"; {sum(agreed)} gaps at a clip end {ENDS_SHARE:.0%} of the way on to "
+            + (f"; {sum(agreed)} gaps at a clip end {cfg.ends_share:.0%} of the way on to "
                f"{' + '.join(self.consensus_fills)}, which agree there" if any(agreed) else ""))
         if not wanted.any() and not agreed.any() and not any(both):
             return seen
@@ -961,8 +975,9 @@ class _Job:
             if pair or cubic or to_learn:  # about the interpolation: the fill's share, on the
                 # rest the pair's mean, the cubic and learn
                 fill = _about(seen[rows, b], [(made[name][rows, b], share)] + [
-                    (made[key][rows, b], (CORROBORATE_LEARN if "learn" in pair else CORROBORATE)
-                     * (1 - share) / 2) for key in pair or ()]
+                    (made[key][rows, b], (cfg.corroborate_learn if "learn" in pair
+                                          else cfg.corroborate) * (1 - share) / 2)
+                    for key in pair or ()]
                     + [(made[key][rows, b], weight) for key, weight
                        in (("hermite", cubic), ("learn", to_learn)) if weight])[:, None]
             elif name != "interp" and share:
@@ -982,12 +997,12 @@ class _Job:
                 out[a:e + 1, b] = paired_ends[name][a:e + 1, b]
         if any(self.medoids):
             self.trace(f"auto: {sum(map(bool, self.medoids))} of {sum(both)} gaps with two keys "
-                        f"take the one of {' / '.join(MEDOID_FILLS)} that lies nearer the other "
-                        "fills than their own")
+                        f"take the one of {' / '.join(cfg.medoid_fills)} that lies nearer the "
+                        "other fills than their own")
         return out
 
     def _medoid(self, filled, alone, runs, both):
-        """Per gap, the fill of :data:`MEDOID_FILLS` (in ``alone``) to take instead of
+        """Per gap, the fill of ``medoid_fills`` (in ``alone``) to take instead of
         ``filled``'s, where it has the least summed RMS distance to the others of the fills and
         ``filled`` ("": ``filled`` has). Gaps of bones one above the other that overlap in time
         are decided together (:meth:`_chains`), over the joints they move and the frames they
@@ -1003,7 +1018,7 @@ class _Job:
         for group, _ in groups:
             first, last = min(runs[i][1] for i in group), max(runs[i][2] for i in group)
             spans.append((None, None, first, last - first + 1))
-        keys = ("",) + MEDOID_FILLS
+        keys = ("",) + self.cfg.medoid_fills
         worlds = {key: self._spans(alone[key] if key else filled, spans) for key in keys}
         for k, (group, moved) in enumerate(groups):
             at = {key: world[k][:, moved] for key, world in worlds.items()}
@@ -1033,13 +1048,13 @@ class _Job:
 
     def _outvoted(self, channels, location, wanted, seen, made, runs, choice):
         """``choice`` in a take without copies, where ``match`` fills every gap of
-        :data:`LONG_GAP` seconds or more unjudged: such a gap keeps the interpolation where it
+        ``long_gap`` seconds or more unjudged: such a gap keeps the interpolation where it
         and ``regress`` (the take's own regression, no knowledge base) lie within
-        :data:`OUTVOTED` of ``match``'s distance from the nearer of them, over the joints the
+        ``outvoted`` of ``match``'s distance from the nearer of them, over the joints the
         gap's bone moves. Two estimates that owe each other nothing outvote the knowledge
         base's."""
         judged = [i for i, ((_, a, e), (name, _)) in enumerate(zip(runs, choice))
-                  if name == "match" and e - a + 1 >= LONG_GAP * self.fps]
+                  if name == "match" and e - a + 1 >= self.cfg.long_gap * self.fps]
         if not judged:
             return choice
         fills = {**made, **self.candidates(channels, location, wanted,
@@ -1054,18 +1069,18 @@ class _Job:
                 return np.sqrt(np.mean((world[x][a:e + 1, joints]
                                         - world[y][a:e + 1, joints]) ** 2))
 
-            if apart("regress", "interp") < OUTVOTED * min(apart("match", "interp"),
+            if apart("regress", "interp") < self.cfg.outvoted * min(apart("match", "interp"),
                                                            apart("match", "regress")):
                 out[i] = ("interp", 0.0)
         return out
 
     def _doubted(self, made, runs, choice, expected):
-        """``choice`` with the share of each gap shorter than :data:`LONG_STACK` cut to ``A / (A
-        + AUTO_DOUBT * D)`` of itself: ``A`` the squared joint departure of the share's blend
+        """``choice`` with the share of each gap shorter than ``long_stack`` cut to ``A / (A
+        + auto_doubt * D)`` of itself: ``A`` the squared joint departure of the share's blend
         from ``interp`` on the gap, ``D`` the mean squared spread of the stacked fills (those of
         :data:`STACK_FILLS` but ``interp``) about their stack there: the fills that agree on the
         gap are believed, the others hardly. Then, where the gap's copies ``expected`` the fill
-        an error (mean squared, per joint and frame; NaN: unknown), by ``max(0, 1 - AUTO_WARY *
+        an error (mean squared, per joint and frame; NaN: unknown), by ``max(0, 1 - auto_wary *
         expected / a)``, ``a`` the mean squared departure so cut: a gap calmer than its copies
         departs little beyond the fill's own error, and keeps about the interpolation (the
         gaps the fill lost, docs/METHOD_NOTES.md, sessions 38 and 50). Longer gaps keep their
@@ -1084,16 +1099,16 @@ class _Job:
             away = share ** 2 * np.sum((at[name] - at["interp"]) ** 2)
             doubt = np.mean([np.sum((at[fill] - at["stack"]) ** 2)
                              for fill in self.stack_fills[1:]])
-            cut = float(away / (away + AUTO_DOUBT * doubt + 1e-12))
+            cut = float(away / (away + self.cfg.auto_doubt * doubt + 1e-12))
             if np.isfinite(expected[i]):  # the departure so cut, per joint and frame
                 departure = cut ** 2 * away / (at[name].shape[0] * at[name].shape[1])
-                cut *= max(0.0, 1 - AUTO_WARY * expected[i] / max(departure, 1e-18))
+                cut *= max(0.0, 1 - self.cfg.auto_wary * expected[i] / max(departure, 1e-18))
             choice[i] = (name, share * cut)
         return choice
 
     def _ends_agreed(self, made, runs, ends):
         """Per gap, whether it lies at a clip end (``ends``) where the fills of
-        :data:`CONSENSUS_FILLS` in ``made`` lie apart by less than :data:`CORROBORATED` times
+        :data:`CONSENSUS_FILLS` in ``made`` lie apart by less than ``corroborated`` times
         their mean departure from the held key (RMS over the joints the gap's bone moves)."""
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), end) in enumerate(zip(runs, ends))
                  if end and self.moved_by(b).any()]
@@ -1105,18 +1120,18 @@ class _Job:
         for k, (i, b, _, _) in enumerate(spans):
             apart, away = _apart({key: world[k][:, self.moved_by(b)]
                                   for key, world in worlds.items()}, x, y)
-            out[i] = away > 0 and apart < CORROBORATED * away
+            out[i] = away > 0 and apart < self.cfg.corroborated * away
         return out
 
     def _corroborated(self, made, runs, choice, learns=None):
-        """Per gap shorter than :data:`LONG_STACK` that keeps part of the interpolation (share
+        """Per gap shorter than ``long_stack`` that keeps part of the interpolation (share
         below 1), the two stacked fills (of :data:`STACK_FILLS` but ``interp``) that lie closest
         together as a share of their mean departure from ``interp`` (RMS over the joints the
-        gap's bone moves), where that share is below :data:`CORROBORATED`: the cubic from the
+        gap's bone moves), where that share is below ``corroborated``: the cubic from the
         keys, the take's own regression and the knowledge base's motion owe each other nothing,
         so where two of them agree on a motion the interpolation lacks, it is there (on the
         non-test takes, docs/METHOD_NOTES.md, session 57). ``learns`` (per gap, or None): where
-        ``learn`` may be one of the two (:data:`CORROBORATE_LEARN`; session 66). None
+        ``learn`` may be one of the two (``corroborate_learn``; session 66). None
         elsewhere."""
         fills = [f for f in self.stack_fills if f != "interp"]
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (_, share)) in enumerate(zip(runs, choice))
@@ -1134,7 +1149,7 @@ class _Job:
                       for m, x in enumerate(some) for y in some[m + 1:]
                       for apart, away in [_apart(at, x, y)]}
             pair = min(ratios, key=ratios.get)
-            if ratios[pair] < CORROBORATED:
+            if ratios[pair] < self.cfg.corroborated:
                 out[i] = pair
         return out
 
@@ -1144,6 +1159,7 @@ class _Job:
         the other gaps; and ``stack_long``'s over every copy where ``fills`` is
         :data:`LONG_STACK_FILLS` (else None). The errors' moments are taken once, for
         ``fills``: those of :data:`STACK_FILLS` are their leading block."""
+        cfg = self.cfg
         worlds = [self._spans(made[name], copies) for name in fills]
         per_gap, total = {}, (0.0, 0.0)
         for k, (i, b, start, length) in enumerate(copies):
@@ -1153,10 +1169,10 @@ class _Job:
             per_gap[i] = tuple(a + m for a, m in zip(per_gap.get(i, (0.0, 0.0)), moments))
             total = tuple(a + m for a, m in zip(total, moments))
         n = len(self.stack_fills)
-        table = stacking.weights(total[0][..., :n, :n], total[1], STACK_RIDGE)
+        table = stacking.weights(total[0][..., :n, :n], total[1], cfg.stack_ridge)
         alone = {i: stacking.weights((total[0] - sums)[..., :n, :n], total[1] - counts,
-                                     STACK_RIDGE) for i, (sums, counts) in per_gap.items()}
-        return table, alone, (stacking.weights(*total, STACK_RIDGE) if len(fills) > n else None)
+                                     cfg.stack_ridge) for i, (sums, counts) in per_gap.items()}
+        return table, alone, (stacking.weights(*total, cfg.stack_ridge) if len(fills) > n else None)
 
     def _stacked(self, made, mask, fills, table_of):
         """``stack``: on each run of ``mask`` the ``fills`` weighed together frame by frame
@@ -1189,7 +1205,7 @@ class _Job:
         return [world[f:f + c[3]] for f, c in zip(first, copies)]
 
 
-def carry_subtrees(rig, basis, gaps, targets, moves, below=None, stay=STAY):
+def carry_subtrees(rig, basis, gaps, targets, moves, below=None, stay=BoneConfig.stay):
     """Basis matrices where each gapped bone (top-down) takes the location that puts its head
     on its target (moving bones) and the rotation that best carries the joints it moves, posed
     by their own channels, onto their targets (Kabsch about its head; the smallest turn from

@@ -23,149 +23,153 @@ USES_KB = ("knn", "auto", "pca")
 NEEDS_KB = ("knn", "pca")
 #: what ``auto`` does where no knowledge base fits, in words
 TAKE_ALONE = "auto fills from the take alone (rigid partners, a spline, a partner's pattern)"
-#: validation gaps (copies of its gaps) per point for ``auto``, and for skeleton joints more where
-#: those hold fewer frames than ``AUTO_PROBE_FRAMES`` (five copies of 3-frame dropouts weigh the
-#: methods on 15 samples; on marker sets rigid partners carry nearly every marker with short
-#: gaps alone either way, and the extra copies only cost time: docs/METHOD_NOTES.md); a point
-#: whose copies hold fewer frames, markers too, has its gaps copied again, further off (one copy
-#: alone misjudged a marker's one gap, the last 15 frames of a take: 24 mm where its rigid
-#: partners alone made 4.5; docs/METHOD_NOTES.md, session 44)
-AUTO_PROBES = 5
-AUTO_PROBE_FRAMES = 30
-#: metres: on a marker set, pairs whose distance strays by at most this much (SD) are kept last,
-#: each as far as its spread lets it (docs/METHOD_NOTES.md, session 48); a skeleton keeps its
-#: exact ones (baselines.RIGID_TIE) exactly
-AUTO_KEPT_SPREAD = 0.005
-#: on a marker set each such pair aims this share of the way from the take's mean distance to
-#: its own distance about the gap (interpolated from where both ends are seen): the distance
-#: drifts as the body turns its joints (docs/METHOD_NOTES.md, session 67)
-AUTO_KEPT_LOCAL = 0.5
-#: ... and, at a frame where one of its ends is seen, counts as this many times its variance: a
-#: marker alone in a gap is placed among its seen partners already, and the error its gap
-#: expects (from copies) is right on the mean, not per gap (docs/METHOD_NOTES.md, session 72)
-AUTO_KEPT_SEEN = 2.0
+@dataclass(frozen=True)
+class AutoConfig:
+    """What ``auto`` on markers and skeleton joints goes by; ``fill(..., config=AutoConfig(...))``.
+    The defaults were chosen on takes that are not test takes."""
 
-#: donors of ``auto``'s rigid-body estimate
-AUTO_DONORS = 3
-#: ``auto`` lets rigid partners alone carry a point whose copies they refill better than the
-#: knowledge base and within this RMS error (metres); the knowledge base then sees it as observed.
-#: Skeleton joints ride on exactly rigid bones; skin markers shift against each other by
-#: millimetres, so a marker set allows more
-AUTO_RIGID_FIRST = 0.005
-AUTO_RIGID_FIRST_MARKERS = 0.02
-#: for markers (not skeleton joints), ``auto``'s rigid-body estimate also carries a point from the
-#: nearest frames (within this many gap lengths) where its steadiest donors are seen, weighed
-#: with the estimate from the gap's ends. A skeleton's steadiest partners are often its
-#: neighbours along a bone chain (a bone's length is constant, the chain still bends), which
-#: frames further away carry wrong
-AUTO_REACH = 3
-#: copies shorter than the gaps (a take with no room for full-length ones, e.g. a limb gone
-#: for half of it) flatter the rigid estimate, whose error grows with the distance from the
-#: gap's ends: its error on them is raised to at least this many times its donors' mean
-#: squared spread over the gaps, times (gap length / copy length - 1), at most 1
-AUTO_SPREAD_CAP = 2.0
-#: skeleton joints whose gaps last this many seconds on the mean also get the knowledge base's
-#: windows of motion (:func:`~.matching.fill_match`) beside its per-frame models, the two
-#: weighted by their errors on the point's copies: a limb gone for seconds takes real motion of
-#: a body that moved like this one (on shorter gaps the windows' mean misses the pose the models
-#: fit; on marker sets the windows never refilled the copies better, and cost time); and the
-#: take's own regression of the point on the points seen through the gap
-#: (:func:`~.regression.regress_points`), weighted by its errors on the copies (on shorter gaps
-#: and on marker sets it misled the copies: docs/METHOD_NOTES.md, "Session 22"); without a
-#: knowledge base the regression (and the pattern below) alone stand in for it (session 73),
-#: from :data:`AUTO_ALONE_SECONDS`
-AUTO_MATCH_SECONDS = 1.0
-#: without a knowledge base the take's own regression and a partner's pattern join a skeleton
-#: joint whose gaps last this many seconds on the mean (with one they would mislead the models
-#: on shorter gaps; without one they are weighed against the rigid partners alone:
-#: docs/METHOD_NOTES.md, "Session 74")
-AUTO_ALONE_SECONDS = 0.5
-#: on those points a partner's pattern (:func:`~.baselines.fill_pattern`) joins the knowledge
-#: base's estimate too where it refills the copies better still, its error on them raised to at
-#: least this many times the variance of its offset to its steadiest partner seen through the
-#: gaps: short copies of a limb gone for seconds flatter a partner whose offset wanders (a leg
-#: follows the other through jumps and squats, not through a walk; docs/METHOD_NOTES.md,
-#: "Session 41")
-AUTO_PATTERN_FLOOR = 0.5
-#: the windows and the partner's pattern join only where they refilled the copies better than
-#: the rest of the knowledge base's estimate, their share opening gradually: 0 at equal errors,
-#: the full inverse-error share where that share is this far above one half (a step there let
-#: rounding at the thousandth of a mm flip a point's fill: docs/METHOD_NOTES.md, "Session 42")
-AUTO_JOIN_RAMP = 0.1
-#: gaps of at most this many seconds are also blended with a spline through the take
-#: (:func:`_with_spline`), by its error on up to ``AUTO_SPLINE_COPIES`` copies of each gap, kept
-#: ``AUTO_SPLINE_MARGIN`` frames from any gap and within ``AUTO_SPLINE_REACH`` gap lengths of
-#: theirs (tuned, docs/METHOD_NOTES.md: over longer gaps a spline's error has a tail that its
-#: copies do not foresee)
-AUTO_SPLINE_SECONDS = 0.2
-#: longer gaps take the spline where it refilled their copies better than the fill is expected
-#: to do on the gap (:func:`_with_spline_joined`), its error on the copies taken this many times
-#: over: that tail (chosen on the tuning takes, docs/METHOD_NOTES.md, session 54: as many
-#: gains, fewer losses than at 1)
-AUTO_SPLINE_TAIL = 2.0
-#: where more than this share of the points is gone on the mean over a gap, an estimate of it
-#: is taken to be off by at least its RMS distance from the spline through the take less
-#: ``AUTO_OFF_SPLINE`` times the spline's expected RMS error, whatever its copies said
-#: (:func:`_off_the_spline`; chosen on the tuning takes, docs/METHOD_NOTES.md, session 55: 0.3
-#: and 0.7 gave the same; at 1 time the spline's error the gains were the same, the losses larger)
-AUTO_BODY_GONE = 0.5
-AUTO_OFF_SPLINE = 2.0
-#: there, a short gap's fill is expected to err this many times (squared) what its copies said,
-#: where more of the body was seen (:func:`_with_spline`; chosen on the tuning takes,
-#: docs/METHOD_NOTES.md, session 56: 2, 4, 8 and leaving the fill out gained 0.6-1.2 %, the
-#: losses growing with it)
-AUTO_GONE_DOUBT = 4.0
-#: the smooth track through the take that all of the above weigh (the spline) goes this share
-#: of the way on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's
-#: windows of each gap's length say how its points move on from their keys; chosen on the
-#: tuning takes, docs/METHOD_NOTES.md, session 65: the whole way gained as much on the mean and
-#: lost more on some takes)
-AUTO_LEARNED = 0.5
-#: ... on gaps of up to this many seconds (the longest the tuning takes' bursts had)
-AUTO_LEARNED_SECONDS = 0.5
-#: where nearly all of the body is gone at once - more than ``AUTO_ALL_GONE`` of the points on
-#: the mean over a marker's gap longer than :data:`AUTO_SPLINE_SECONDS` and of up to
-#: :data:`AUTO_LEARNED_SECONDS`, both ends in the take - its fill goes ``AUTO_ALL_GONE_SHARE`` of
-#: the way on to the take's own interpolator: the few partners and the models that see a few
-#: points stray further than their copies foretell (chosen on the tuning takes,
-#: docs/METHOD_NOTES.md, session 66)
-AUTO_ALL_GONE = 0.9
-AUTO_ALL_GONE_SHARE = 0.5
-#: beside the partner's pattern, a marker's short gap at a clip end joins the take's own
-#: interpolator from its one key (:func:`~.baselines.fill_learned_ends`) by its inverse error
-#: on one-sided copies times this weight (chosen on the tuning takes, docs/METHOD_NOTES.md,
-#: session 65: at weight 1 more gain, a larger worst case; a skeleton's joints lost by it)
-AUTO_LEARNED_ENDS_WEIGHT = 0.5
-#: and only on gaps of up to this many seconds (on the tuning takes it gained on every take at
-#: 0.025 and 0.05 s, and lost on some at 0.1 s)
-AUTO_LEARNED_ENDS_SECONDS = 0.05
-#: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
-#: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
-#: went astray on the tuning takes, where the partner's pattern carries them: docs/METHOD_NOTES.md,
-#: session 46)
-AUTO_PLACE_ENDS_SECONDS = 0.1
-AUTO_SPLINE_COPIES = 4
-AUTO_SPLINE_MARGIN = 10
-AUTO_SPLINE_REACH = 4
-#: beside the spline, the pattern fill (the steadiest partner's trajectory, offset to the gap's
-#: ends: it follows a turn inside the gap that the spline cuts) joins short gaps by its inverse
-#: error on the same copies at this weight (docs/METHOD_NOTES.md, sessions 35-36)
-AUTO_PATTERN_WEIGHT = 0.5
-#: longer gaps lean towards the same spline near their ends (:func:`_with_spline_ends`), by a
-#: weight per distance from the nearer end: the least-squares share of the copies' frames at that
-#: distance (shrunk towards none by this ridge), never rising with the distance, none below
-#: ``AUTO_ENDS_LEAST`` or where fewer than ``AUTO_ENDS_SAMPLES`` copied frames lie that far in
-AUTO_ENDS_RIDGE = 0.5
-AUTO_ENDS_LEAST = 0.1
-AUTO_ENDS_SAMPLES = 20
-#: the knowledge base's fill of the copies only weighs the methods: it fits fewer local models
-#: (at most this many a second), stops after fewer iterations than the fill of the gaps and takes
-#: this query-noise factor (the one ``models.UNCHECKED_FACTOR`` uses where nothing can be
-#: checked) instead of choosing one (same accuracy on the tuning takes, 0.8-0.9x the time:
-#: docs/METHOD_NOTES.md, "Session 25")
-AUTO_COPIES_MODEL_FPS = 15.0
-AUTO_COPIES_ITERATIONS = 10
-AUTO_COPIES_QUERY_NOISE = 0.25
+    #: validation gaps (copies of its gaps) per point for ``auto``, and for skeleton joints more
+    #: where those hold fewer frames than ``probe_frames`` (five copies of 3-frame dropouts weigh
+    #: the methods on 15 samples; on marker sets rigid partners carry nearly every marker with short
+    #: gaps alone either way, and the extra copies only cost time: docs/METHOD_NOTES.md); a point
+    #: whose copies hold fewer frames, markers too, has its gaps copied again, further off (one copy
+    #: alone misjudged a marker's one gap, the last 15 frames of a take: 24 mm where its rigid
+    #: partners alone made 4.5; docs/METHOD_NOTES.md, session 44)
+    probes: int = 5
+    probe_frames: int = 30
+    #: metres: on a marker set, pairs whose distance strays by at most this much (SD) are kept last,
+    #: each as far as its spread lets it (docs/METHOD_NOTES.md, session 48); a skeleton keeps its
+    #: exact ones (baselines.RIGID_TIE) exactly
+    kept_spread: float = 0.005
+    #: on a marker set each such pair aims this share of the way from the take's mean distance to
+    #: its own distance about the gap (interpolated from where both ends are seen): the distance
+    #: drifts as the body turns its joints (docs/METHOD_NOTES.md, session 67)
+    kept_local: float = 0.5
+    #: ... and, at a frame where one of its ends is seen, counts as this many times its variance: a
+    #: marker alone in a gap is placed among its seen partners already, and the error its gap
+    #: expects (from copies) is right on the mean, not per gap (docs/METHOD_NOTES.md, session 72)
+    kept_seen: float = 2.0
+    #: donors of ``auto``'s rigid-body estimate
+    donors: int = 3
+    #: ``auto`` lets rigid partners alone carry a point whose copies they refill better than the
+    #: knowledge base and within this RMS error (metres); the knowledge base then sees it as
+    #: observed. Skeleton joints ride on exactly rigid bones; skin markers shift against each other
+    #: by millimetres, so a marker set allows more
+    rigid_first: float = 0.005
+    rigid_first_markers: float = 0.02
+    #: for markers (not skeleton joints), ``auto``'s rigid-body estimate also carries a point from
+    #: the nearest frames (within this many gap lengths) where its steadiest donors are seen,
+    #: weighed with the estimate from the gap's ends. A skeleton's steadiest partners are often its
+    #: neighbours along a bone chain (a bone's length is constant, the chain still bends), which
+    #: frames further away carry wrong
+    reach: int = 3
+    #: copies shorter than the gaps (a take with no room for full-length ones, e.g. a limb gone for
+    #: half of it) flatter the rigid estimate, whose error grows with the distance from the gap's
+    #: ends: its error on them is raised to at least this many times its donors' mean squared spread
+    #: over the gaps, times (gap length / copy length - 1), at most 1
+    spread_cap: float = 2.0
+    #: skeleton joints whose gaps last this many seconds on the mean also get the knowledge base's
+    #: windows of motion (:func:`~.matching.fill_match`) beside its per-frame models, the two
+    #: weighted by their errors on the point's copies: a limb gone for seconds takes real motion of
+    #: a body that moved like this one (on shorter gaps the windows' mean misses the pose the models
+    #: fit; on marker sets the windows never refilled the copies better, and cost time); and the
+    #: take's own regression of the point on the points seen through the gap
+    #: (:func:`~.regression.regress_points`), weighted by its errors on the copies (on shorter gaps
+    #: and on marker sets it misled the copies: docs/METHOD_NOTES.md, "Session 22"); without a
+    #: knowledge base the regression (and the pattern below) alone stand in for it (session 73),
+    #: from ``alone_seconds``
+    match_seconds: float = 1.0
+    #: without a knowledge base the take's own regression and a partner's pattern join a skeleton
+    #: joint whose gaps last this many seconds on the mean (with one they would mislead the models
+    #: on shorter gaps; without one they are weighed against the rigid partners alone:
+    #: docs/METHOD_NOTES.md, "Session 74")
+    alone_seconds: float = 0.5
+    #: on those points a partner's pattern (:func:`~.baselines.fill_pattern`) joins the knowledge
+    #: base's estimate too where it refills the copies better still, its error on them raised to at
+    #: least this many times the variance of its offset to its steadiest partner seen through the
+    #: gaps: short copies of a limb gone for seconds flatter a partner whose offset wanders (a leg
+    #: follows the other through jumps and squats, not through a walk; docs/METHOD_NOTES.md,
+    #: "Session 41")
+    pattern_floor: float = 0.5
+    #: the windows and the partner's pattern join only where they refilled the copies better than
+    #: the rest of the knowledge base's estimate, their share opening gradually: 0 at equal errors,
+    #: the full inverse-error share where that share is this far above one half (a step there let
+    #: rounding at the thousandth of a mm flip a point's fill: docs/METHOD_NOTES.md, "Session 42")
+    join_ramp: float = 0.1
+    #: gaps of at most this many seconds are also blended with a spline through the take
+    #: (:func:`_with_spline`), by its error on up to ``spline_copies`` copies of each gap, kept
+    #: ``spline_margin`` frames from any gap and within ``spline_reach`` gap lengths of theirs
+    #: (tuned, docs/METHOD_NOTES.md: over longer gaps a spline's error has a tail that its copies do
+    #: not foresee)
+    spline_seconds: float = 0.2
+    #: longer gaps take the spline where it refilled their copies better than the fill is expected
+    #: to do on the gap (:func:`_with_spline_joined`), its error on the copies taken this many times
+    #: over: that tail (chosen on the tuning takes, docs/METHOD_NOTES.md, session 54: as many gains,
+    #: fewer losses than at 1)
+    spline_tail: float = 2.0
+    #: where more than this share of the points is gone on the mean over a gap, an estimate of it is
+    #: taken to be off by at least its RMS distance from the spline through the take less
+    #: ``off_spline`` times the spline's expected RMS error, whatever its copies said
+    #: (:func:`_off_the_spline`; chosen on the tuning takes, docs/METHOD_NOTES.md, session 55: 0.3
+    #: and 0.7 gave the same; at 1 time the spline's error the gains were the same, the losses
+    #: larger)
+    body_gone: float = 0.5
+    off_spline: float = 2.0
+    #: there, a short gap's fill is expected to err this many times (squared) what its copies said,
+    #: where more of the body was seen (:func:`_with_spline`; chosen on the tuning takes,
+    #: docs/METHOD_NOTES.md, session 56: 2, 4, 8 and leaving the fill out gained 0.6-1.2 %, the
+    #: losses growing with it)
+    gone_doubt: float = 4.0
+    #: the smooth track through the take that all of the above weigh (the spline) goes this share of
+    #: the way on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's
+    #: windows of each gap's length say how its points move on from their keys; chosen on the tuning
+    #: takes, docs/METHOD_NOTES.md, session 65: the whole way gained as much on the mean and lost
+    #: more on some takes)
+    learned: float = 0.5
+    #: ... on gaps of up to this many seconds (the longest the tuning takes' bursts had)
+    learned_seconds: float = 0.5
+    #: where nearly all of the body is gone at once - more than ``all_gone`` of the points on the
+    #: mean over a marker's gap longer than ``spline_seconds`` and of up to ``learned_seconds``,
+    #: both ends in the take - its fill goes ``all_gone_share`` of the way on to the take's own
+    #: interpolator: the few partners and the models that see a few points stray further than their
+    #: copies foretell (chosen on the tuning takes, docs/METHOD_NOTES.md, session 66)
+    all_gone: float = 0.9
+    all_gone_share: float = 0.5
+    #: beside the partner's pattern, a marker's short gap at a clip end joins the take's own
+    #: interpolator from its one key (:func:`~.baselines.fill_learned_ends`) by its inverse error on
+    #: one-sided copies times this weight (chosen on the tuning takes, docs/METHOD_NOTES.md, session
+    #: 65: at weight 1 more gain, a larger worst case; a skeleton's joints lost by it)
+    learned_ends_weight: float = 0.5
+    #: and only on gaps of up to this many seconds (on the tuning takes it gained on every take at
+    #: 0.025 and 0.05 s, and lost on some at 0.1 s)
+    learned_ends_seconds: float = 0.05
+    #: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
+    #: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
+    #: went astray on the tuning takes, where the partner's pattern carries them:
+    #: docs/METHOD_NOTES.md, session 46)
+    place_ends_seconds: float = 0.1
+    spline_copies: int = 4
+    spline_margin: int = 10
+    spline_reach: int = 4
+    #: beside the spline, the pattern fill (the steadiest partner's trajectory, offset to the gap's
+    #: ends: it follows a turn inside the gap that the spline cuts) joins short gaps by its inverse
+    #: error on the same copies at this weight (docs/METHOD_NOTES.md, sessions 35-36)
+    pattern_weight: float = 0.5
+    #: longer gaps lean towards the same spline near their ends (:func:`_with_spline_ends`), by a
+    #: weight per distance from the nearer end: the least-squares share of the copies' frames at
+    #: that distance (shrunk towards none by this ridge), never rising with the distance, none below
+    #: ``ends_least`` or where fewer than ``ends_samples`` copied frames lie that far in
+    ends_ridge: float = 0.5
+    ends_least: float = 0.1
+    ends_samples: int = 20
+    #: the knowledge base's fill of the copies only weighs the methods: it fits fewer local models
+    #: (at most this many a second), stops after fewer iterations than the fill of the gaps and
+    #: takes this query-noise factor (the one ``models.UNCHECKED_FACTOR`` uses where nothing can be
+    #: checked) instead of choosing one (same accuracy on the tuning takes, 0.8-0.9x the time:
+    #: docs/METHOD_NOTES.md, "Session 25")
+    copies_model_fps: float = 15.0
+    copies_iterations: int = 10
+    copies_query_noise: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -241,7 +245,7 @@ def kb_for_take(names, method, kb=None, alone=TAKE_ALONE, choose="-k KB.npz"):
 
 
 def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, should_cancel=None,
-         report=None, max_gap=None, return_account=False, trace=None):
+         report=None, max_gap=None, return_account=False, trace=None, config=None):
     """Fill the gaps of a motion with the named method.
 
     Parameters
@@ -261,6 +265,8 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
     report, trace : callable, optional
         ``report(message)``: what the user is told (points left unfilled, ...); ``trace``: what
         each of ``auto``'s stages did (``--verbose``).
+    config : AutoConfig, optional
+        What ``auto`` goes by (default: ``AutoConfig()``).
 
     Returns
     -------
@@ -281,7 +287,7 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
     accounts = None
     if method == "auto":
         out, accounts = _fill_auto(motion, kb, settings, progress, should_cancel, report,
-                                   trace)
+                                   trace, config or AutoConfig())
     else:
         out = _fill(motion, method, kb, settings, progress, should_cancel, report)
     if max_gap:
@@ -339,48 +345,48 @@ def _with_fill(motion, out):
     return motion.replace(positions=out, filled=filled)
 
 
-def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
+def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg):
     """The knowledge-base fill and a rigid-body fill, blended per point by how well each refills
     copies of the point's gaps on this take.
 
     Each gap is copied (same points, same length, or shorter where the take has no room) to
     nearby frames where its point is observed; both fill those copies (seeing, as the gaps'
     fill will, what rigid partners carry closely through gaps longer than
-    :data:`AUTO_SPLINE_SECONDS`: :func:`_carried_closely`), and a point's gaps take
+    ``spline_seconds``: :func:`_carried_closely`), and a point's gaps take
     ``w * knn + (1 - w) * rigid`` with ``w = e_rigid / (e_knn + e_rigid)`` (``e``: mean squared
     error on the point's copies: inverse-variance weights). Rigid partners go first: a point
-    they refill better than the knowledge base and within :data:`AUTO_RIGID_FIRST` (markers:
-    :data:`AUTO_RIGID_FIRST_MARKERS`) is theirs alone, and the knowledge base's fill of the
+    they refill better than the knowledge base and within ``rigid_first`` (markers:
+    ``rigid_first_markers``) is theirs alone, and the knowledge base's fill of the
     others sees it as observed. Points without copies keep the knowledge base's fill; samples
     with no rigid donors (or points the knowledge base lacks) the one method that has them.
     Rigid partners win on points that ride on a segment (head, pelvis, a hand's fingers), the
     knowledge base where whole segments or long stretches are gone. The donors are chosen and
     weighted by how steady their distance to the point is over the take
     (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate also reaches past the
-    gap's ends (:data:`AUTO_REACH`), and its error on the copies is scaled at each frame by how
+    gap's ends (``reach``), and its error on the copies is scaled at each frame by how
     far its donors stray there against at the copies (:func:`_by_steadiness`); within it, the
     marker's place among those partners regressed on further partners
     (:func:`~.regression.regress_in_frame`: skin slides, a marker near a joint moves among its
     donors) joins the rigid-body fill by their errors on the copies. Copies shorter
     than the gaps do not vouch for the rigid estimate beyond its donors' spread
-    (:data:`AUTO_SPREAD_CAP`). On a marker set, a gap where more than :data:`AUTO_BODY_GONE` of
+    (``spread_cap``). On a marker set, a gap where more than ``body_gone`` of
     the points are gone leaves the knowledge base out (:func:`_models_left_out_where_gone`: its
     models see too little of the body). On points with long gaps
-    (:data:`AUTO_MATCH_SECONDS`) the knowledge base's estimate is its models' fill and its
+    (``match_seconds``) the knowledge base's estimate is its models' fill and its
     windows of motion (:func:`~.matching.fill_match`) weighted by their errors on the copies,
     the windows only where they refill them better, and then the take's own regression of the
     point on the rest of the body (:func:`~.regression.regress_points`), by its error on the
     copies, and a partner's pattern where it refills them better still
-    (:data:`AUTO_PATTERN_FLOOR`); without a knowledge base those two alone take its place, from
-    :data:`AUTO_ALONE_SECONDS`. A spline through the take joins longer gaps where it refilled
+    (``pattern_floor``); without a knowledge base those two alone take its place, from
+    ``alone_seconds``. A spline through the take joins longer gaps where it refilled
     the point's copies better than the fill is expected to do on the gap
     (:func:`_with_spline_joined`: most of the body gone at once leaves far partners and models
     that see little), and they lean towards it next to their ends (:func:`_with_spline_ends`);
-    short gaps (:data:`AUTO_SPLINE_SECONDS`) are last blended with that spline and a partner's
+    short gaps (``spline_seconds``) are last blended with that spline and a partner's
     pattern by their errors on copies of each gap (:func:`_with_spline`), those at a clip end
     with the pattern from the one end alone, by errors on one-sided copies
     (:func:`_with_pattern_ends`); a marker's gap where nearly all of the body is gone goes
-    :data:`AUTO_ALL_GONE_SHARE` of the way on to the take's own interpolator
+    ``all_gone_share`` of the way on to the take's own interpolator
     (:func:`_with_all_gone_learnt`); holes no estimate reached (dropped frames without a
     knowledge base) take the spline alone (:func:`_with_holes_splined`). That spline goes half
     of the way on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's
@@ -405,10 +411,10 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
     # without a knowledge base the take alone fills: rigid partners, a spline, a partner's pattern
     lacking = list(motion.names) if kb is None else match_names(kb, motion.names)[1]
     missing = motion.missing
-    probe = validation_gaps(missing, AUTO_PROBES,
-                            least=0 if motion.parents is None else AUTO_PROBE_FRAMES,
-                            enough=AUTO_PROBE_FRAMES)
-    seconds = AUTO_MATCH_SECONDS if kb is not None else AUTO_ALONE_SECONDS
+    probe = validation_gaps(missing, cfg.probes,
+                            least=0 if motion.parents is None else cfg.probe_frames,
+                            enough=cfg.probe_frames)
+    seconds = cfg.match_seconds if kb is not None else cfg.alone_seconds
     with np.errstate(invalid="ignore"):
         long = (probe.any(axis=0) & (_mean_run(missing) >= seconds * motion.fps)
                 & (motion.parents is not None))
@@ -416,8 +422,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
     partners = {}  # the donors' statistics on this take, computed once
     donors = {}  # the pattern's, on the take with its copies hidden
     # marker sets reach past the gap ends and let partners carry a marker alone within more
-    reach, alone = ((AUTO_REACH, AUTO_RIGID_FIRST_MARKERS) if motion.parents is None
-                    else (None, AUTO_RIGID_FIRST))
+    reach, alone = ((cfg.reach, cfg.rigid_first_markers) if motion.parents is None
+                    else (None, cfg.rigid_first))
 
     stop = threading.Event()  # the fill ended early: the rigid estimates beside it stop too
 
@@ -425,7 +431,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
         return stop.is_set() or bool(should_cancel and should_cancel())
 
     def carried(target, only=None):
-        rigid, spread = rigid_estimates(target.positions, AUTO_DONORS, weighted=True,
+        rigid, spread = rigid_estimates(target.positions, cfg.donors, weighted=True,
                                         partners=motion.positions, cache=partners,
                                         reach=reach, should_cancel=stopped, only=only)
         return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
@@ -433,7 +439,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
     def placed(target, only=None):  # a marker's place among its rigid partners, regressed
         return regress_in_frame(target.positions,
                                 lambda p: steady_partners(motion.positions, p, partners), only,
-                                round(AUTO_PLACE_ENDS_SECONDS * motion.fps))
+                                round(cfg.place_ends_seconds * motion.fps))
 
     rigid, spread = carried(motion)
     # the knowledge base's fill where there is none
@@ -442,7 +448,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
     # through a gap, the knowledge base sees it there (below), so it is seen at the copies too
     hidden = motion.replace(positions=np.where(
         probe[..., None], np.nan,
-        np.where(_carried_closely(missing, spread, alone, motion.fps)[..., None], rigid,
+        np.where(_carried_closely(missing, spread, alone, motion.fps, cfg)[..., None], rigid,
                  motion.positions)))
     # the rigid estimates and the windows need no local models: they run beside the first fill
     # (numpy lets go of the interpreter in its products; the results are the same as one after
@@ -464,9 +470,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
         try:
             # one pass: its only use is to weigh the methods
             scout = replace(settings, renormalise=False, max_iterations=min(
-                settings.max_iterations, AUTO_COPIES_ITERATIONS), model_fps=min(
-                settings.model_fps or np.inf, AUTO_COPIES_MODEL_FPS),
-                query_noise=AUTO_COPIES_QUERY_NOISE if settings.query_noise == "auto"
+                settings.max_iterations, cfg.copies_iterations), model_fps=min(
+                settings.model_fps or np.inf, cfg.copies_model_fps),
+                query_noise=cfg.copies_query_noise if settings.query_noise == "auto"
                 else settings.query_noise)
             knn_copies = (None if not probe.any() else nowhere if kb is None else
                           fill_knn(hidden, kb, scout, progress=lambda f, m: progress(0.5 * f, m),
@@ -490,7 +496,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
             return np.nan_to_num(error, nan=np.inf)
 
         e_knn, e_rigid = on_copies_of(knn_copies), on_copies_of(on_copies)
-        e_rigid = np.maximum(e_rigid, _spread_floor(missing, probe, spread))
+        e_rigid = np.maximum(e_rigid, _spread_floor(missing, probe, spread, cfg))
         if markers:  # the place among the partners joins the rigid estimate by its error
             among = _joined(e_rigid, _on_copies_where(probe, on_copies_of, placed_copies,
                                                       on_copies))[0]
@@ -506,14 +512,14 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
             # the windows join where they refilled the point's copies better than the models
             if kb is not None:
                 windows, e_kb = _joined(e_knn, np.where(long, on_copies_of(matched), np.inf),
-                                        AUTO_JOIN_RAMP)
+                                        cfg.join_ramp)
             # the take's own regression joins the knowledge base's estimate by its error
             own, e_kb = _joined(e_kb, np.where(long, on_copies_of(regressed), np.inf))
             # the partner's pattern where it refilled them better still, trusted no closer than
             # its offset wanders over the take
-            e_pattern = np.maximum(on_copies_of(patterned), AUTO_PATTERN_FLOOR * probe.sum(
+            e_pattern = np.maximum(on_copies_of(patterned), cfg.pattern_floor * probe.sum(
                 axis=0) * _offset_variance(missing, donors))
-            by_partner, e_kb = _joined(e_kb, np.where(long, e_pattern, np.inf), AUTO_JOIN_RAMP)
+            by_partner, e_kb = _joined(e_kb, np.where(long, e_pattern, np.inf), cfg.join_ramp)
         with np.errstate(invalid="ignore"):
             share = e_rigid / (e_kb + e_rigid)
         weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
@@ -560,40 +566,42 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
     if markers:
         shares = _by_steadiness(weight, e_kb, e_rigid, *spreads)
     if motion.parents is None and kb is not None:
-        shares, knn = _models_left_out_where_gone(missing, shares, knn)
+        shares, knn = _models_left_out_where_gone(missing, shares, knn, cfg)
     out = _blend(knn, rigid, shares)
     if probe.any():
         if long.any():
             knn_copies = _mix_in(_mix_in(_mix_in(knn_copies, matched, windows), regressed, own),
                                  patterned, by_partner)
         copies = _blend(knn_copies, on_copies, weight)
-        smooth = _smooth_of(motion)
-        learnt, learnt_copies = _learnt(missing, probe, motion.fps)
+        smooth = _smooth_of(motion, cfg)
+        learnt, learnt_copies = _learnt(missing, probe, motion.fps, cfg)
         spline = smooth(motion.positions, learnt)
         # the spline with the copies hidden, for the longer gaps (none: a take of short dropouts)
         hidden_spline = (smooth(np.where(probe[..., None], np.nan, motion.positions),
                                 learnt_copies)
-                         if _longer_gaps(missing, motion.fps) else None)
+                         if _longer_gaps(missing, motion.fps, cfg) else None)
         with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
             per_sample = on_copies_of(copies) / probe.sum(axis=0)
         def harder_at(p, a, b):  # how much harder than its copies a gap is for the fill
             return harder(p, a, b, float(shares[a:b + 1, p].mean()))
 
         out, eased = _with_spline_joined(motion, out, copies, probe, spline, hidden_spline,
-                                         harder_at, trace)
+                                         harder_at, trace, cfg)
         out = _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, weight == 0,
-                                trace)
+                                trace, cfg)
 
         def rigid_of(hidden):
             return carried(motion.replace(positions=np.where(
                 hidden[..., None], np.nan, motion.positions)), hidden)[0]
 
-        out, short = _with_spline(motion, out, spline, per_sample, weight == 0, rigid_of, trace)
+        out, short = _with_spline(motion, out, spline, per_sample, weight == 0, rigid_of, trace,
+                                  cfg)
         eased.update(short)
-        out, at_ends = _with_pattern_ends(motion, out, per_sample, weight == 0, rigid_of, trace)
+        out, at_ends = _with_pattern_ends(motion, out, per_sample, weight == 0, rigid_of, trace,
+                                          cfg)
         eased.update(at_ends)
-    out, all_gone = _with_all_gone_learnt(motion, out, trace)
-    out, holes = _with_holes_splined(motion, out, trace)
+    out, all_gone = _with_all_gone_learnt(motion, out, trace, cfg)
+    out, holes = _with_holes_splined(motion, out, trace, cfg)
     eased.update({(p, a): (1.0, 0.0, float("nan")) for p, a in holes})
     gappy = missing.any(axis=0)
     rigidly = gappy & (weight < 0.5)
@@ -614,9 +622,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
         spline_share, pattern_share, squared = eased.get(
             (p, a), (0.0, 0.0, per_sample[p] * harder(p, a, b, kb_side)))
         if (p, a) in all_gone:  # the smooth track's share grows by the rest's part
-            spline_share += AUTO_ALL_GONE_SHARE * (1 - spline_share)
-            pattern_share *= 1 - AUTO_ALL_GONE_SHARE
-        hold[a:b + 1, p] = motion.parents is None and b - a < _spline_frames(motion.fps)
+            spline_share += cfg.all_gone_share * (1 - spline_share)
+            pattern_share *= 1 - cfg.all_gone_share
+        hold[a:b + 1, p] = motion.parents is None and b - a < _spline_frames(motion.fps, cfg)
         # (a held sample counts as known and sure where the others' fallback is taken)
         uncertainty[a:b + 1, p] = 0.0 if hold[a, p] else squared
         rest = 1 - spline_share - pattern_share
@@ -628,15 +636,15 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace):
             windows=float(models * windows[p] * (1 - own[p])), own=float(models * own[p]),
             spline=float(spline_share), pattern=float(pattern_share + kb_share * by_partner[p]),
             estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
-    out = _with_distances_kept(motion, out, uncertainty, hold, trace, partners)
+    out = _with_distances_kept(motion, out, uncertainty, hold, trace, partners, cfg)
     return _with_fill(motion, out), accounts
 
 
-def _with_distances_kept(motion, out, uncertainty, hold, report, partners):
+def _with_distances_kept(motion, out, uncertainty, hold, report, partners, cfg):
     """The fill ``out`` with the take's missing samples moved onto the distances it keeps
-    exactly (a skeleton) or towards those it keeps within :data:`AUTO_KEPT_SPREAD` (a marker
-    set, each pair as far as its spread lets it, :data:`AUTO_KEPT_SEEN` times as loosely where
-    one of its ends is seen, and aiming :data:`AUTO_KEPT_LOCAL` of the way from its mean
+    exactly (a skeleton) or towards those it keeps within ``kept_spread`` (a marker
+    set, each pair as far as its spread lets it, ``kept_seen`` times as loosely where
+    one of its ends is seen, and aiming ``kept_local`` of the way from its mean
     distance to its own about the gap; :func:`~.baselines.steady_pairs`,
     :func:`~.distances.keep_distances`), each by its expected squared error ``uncertainty``
     (where unknown: the largest known, else 1 m^2; at least :data:`~.baselines.RIGID_TIE`
@@ -650,7 +658,7 @@ def _with_distances_kept(motion, out, uncertainty, hold, report, partners):
     missing = motion.missing
     markers = motion.parents is None  # a skeleton's bones are exact; markers slide on the skin
     pairs, lengths, spreads = baselines.steady_pairs(
-        motion.positions, AUTO_KEPT_SPREAD if markers else baselines.RIGID_TIE, partners)
+        motion.positions, cfg.kept_spread if markers else baselines.RIGID_TIE, partners)
     if not (missing[:, pairs[:, 0]] | missing[:, pairs[:, 1]]).any():
         return out
     # the fill holds estimates of the missing samples alone where the knowledge base gave none:
@@ -662,14 +670,14 @@ def _with_distances_kept(motion, out, uncertainty, hold, report, partners):
     uncertainty = np.where(missing & ~hold, np.maximum(np.where(known, uncertainty, fallback),
                                                        baselines.RIGID_TIE ** 2), 0.0)
     kept = keep_distances(out, missing, uncertainty, pairs, lengths,
-                          spreads if markers else None, local=AUTO_KEPT_LOCAL if markers else 0.0,
-                          seen=AUTO_KEPT_SEEN if markers else 1.0)
+                          spreads if markers else None, local=cfg.kept_local if markers else 0.0,
+                          seen=cfg.kept_seen if markers else 1.0)
     moved = np.linalg.norm(kept - out, axis=2)[missing]
     moved = moved[np.isfinite(moved)]
     if moved.size:
         report(f"auto: filled samples moved towards the {len(pairs)} distances the take keeps"
-               + (f" within {1000 * AUTO_KEPT_SPREAD:g} mm (markers on one segment; each "
-                  f"{AUTO_KEPT_LOCAL:.0%} of the way to its own distance about the gap)" if markers
+               + (f" within {1000 * cfg.kept_spread:g} mm (markers on one segment; each "
+                  f"{cfg.kept_local:.0%} of the way to its own distance about the gap)" if markers
                   else " exactly (a bone's length, joints on one segment)")
                + f": median {1000 * np.median(moved):.1f} mm, at most "
                f"{1000 * moved.max():.1f} mm")
@@ -761,14 +769,14 @@ def _by_steadiness(weight, e_kb, e_rigid, squared, on_copies):
     return np.where(judged[None] & np.isfinite(share), share, weight[None])
 
 
-def _models_left_out_where_gone(missing, shares, knn):
+def _models_left_out_where_gone(missing, shares, knn, cfg):
     """The knowledge base's share per frame (``shares``) and estimate (``knn``) with both left
-    out of each marker's gap where more than :data:`AUTO_BODY_GONE` of the points are gone on the
+    out of each marker's gap where more than ``body_gone`` of the points are gone on the
     mean over it: its models see too little of the body there, and the gap is filled as a take
     without a knowledge base fills it (the rigid partners left, then the spline and the take's
     own interpolator; chosen on the CMU C3D tuning takes' bursts, docs/METHOD_NOTES.md, session
     67)."""
-    gone = [(p, a, b) for p, a, b in gap_runs(missing) if _body_gone(missing, a, b)]
+    gone = [(p, a, b) for p, a, b in gap_runs(missing) if _body_gone(missing, a, b, cfg.body_gone)]
     if not gone:
         return shares, knn
     shares = np.array(np.broadcast_to(shares, missing.shape), dtype=float)
@@ -803,28 +811,28 @@ def _blend(kb, rigid, weight):
     return out
 
 
-def _longer_gaps(missing, fps):
-    """The gaps ``(point, first, last)`` longer than :data:`AUTO_SPLINE_SECONDS` with both ends in
+def _longer_gaps(missing, fps, cfg):
+    """The gaps ``(point, first, last)`` longer than ``spline_seconds`` with both ends in
     the take: those a spline through the take joins (:func:`_with_spline_joined`) and leans
     them towards near their ends (:func:`_with_spline_ends`)."""
-    shortest = _spline_frames(fps)
+    shortest = _spline_frames(fps, cfg)
     return [(p, a, b) for p, a, b in gap_runs(missing)
             if a > 0 and b < len(missing) - 1 and b - a + 1 > shortest]
 
 
-def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harder, report):
-    """``out`` with each gap longer than :data:`AUTO_SPLINE_SECONDS` (both ends in the take)
+def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harder, report, cfg):
+    """``out`` with each gap longer than ``spline_seconds`` (both ends in the take)
     joined by ``spline`` (a cubic spline of each point through the take) where that refilled the
     point's longer copies (``probe``) better than the fill is expected to do on the gap, by
-    inverse errors (:func:`_joined`, :data:`AUTO_JOIN_RAMP`): the spline's error on them
+    inverse errors (:func:`_joined`, ``join_ramp``): the spline's error on them
     (``hidden_spline``: the spline with the copies hidden) against the fill's (``copies``: its
     estimate of them; infinite where it left some open), the rigid part of that scaled by how
     far the rigid donors spread over the gap against over the copies (``harder(p, a, b)``,
-    :func:`_harder_for_partners`), the spline's by :data:`AUTO_SPLINE_TAIL` (over longer gaps
+    :func:`_harder_for_partners`), the spline's by ``spline_tail`` (over longer gaps
     its error has a tail that its copies do not foresee). Where most of the body is gone at
     once (a subject half out of the volume, a prop in the way) the donors left are far from the
     point and the knowledge base's models see few points: both stray by far more than the
-    spline over a few tenths of a second. There (more than :data:`AUTO_BODY_GONE` of the points
+    spline over a few tenths of a second. There (more than ``body_gone`` of the points
     gone on the mean over the gap) the spline is first joined by itself carried by how far its
     steadiest partners seen stray from their own splines over the gap
     (:func:`~.baselines.fill_spline_carried`: a landing or a turn the spline misses, the seen
@@ -833,10 +841,10 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     where more was seen, vouch for it more than the gap bears out). Returns the fill and, per
     gap joined (``(point, first frame)``), the spline's share (the carried one's in it), none of
     a pattern's and the blend's expected squared error per sample."""
-    gaps = _longer_gaps(motion.missing, motion.fps)
+    gaps = _longer_gaps(motion.missing, motion.fps, cfg)
     if not gaps:
         return out, {}
-    shortest = _spline_frames(motion.fps)
+    shortest = _spline_frames(motion.fps, cfg)
     longer = np.zeros_like(probe)
     longest = np.zeros(probe.shape[1], dtype=int)
     for p, a, b in gap_runs(probe):
@@ -854,7 +862,7 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     # (chosen on the tuning takes, docs/METHOD_NOTES.md, session 56)
     gone = np.zeros_like(probe)
     for p, a, b in gaps:
-        gone[a:b + 1, p] = _body_gone(motion.missing, a, b)
+        gone[a:b + 1, p] = _body_gone(motion.missing, a, b, cfg.body_gone)
     if gone.any():
         carried = baselines.fill_spline_carried(motion.positions, spline, gone)
         hidden = np.where(probe[..., None], np.nan, motion.positions)
@@ -869,16 +877,16 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
         if not (b - a + 1 <= longest[p] and not np.isnan(e_fill[p])
                 and np.isfinite(e_spline[p])):
             continue
-        smooth, e_other = spline[a:b + 1, p], e_spline[p] * AUTO_SPLINE_TAIL
+        smooth, e_other = spline[a:b + 1, p], e_spline[p] * cfg.spline_tail
         if gone[a, p] and lean[p] > 0:
             smooth = (1 - lean[p]) * smooth + lean[p] * carried[a:b + 1, p]
             e_other = e_lean[p]
         e_here = _off_the_spline(out, spline, motion.missing, p, a, b,
-                                 e_fill[p] * harder(p, a, b), e_spline[p] * AUTO_SPLINE_TAIL)
+                                 e_fill[p] * harder(p, a, b), e_spline[p] * cfg.spline_tail, cfg)
         # where most of the body is gone the fill's copies vouch for it more than the gap bears
         # out (:func:`_off_the_spline`): the smooth estimate joins by inverse errors, unramped
         share, squared = _joined(np.array(e_here), np.array(e_other),
-                                 None if gone[a, p] else AUTO_JOIN_RAMP)
+                                 None if gone[a, p] else cfg.join_ramp)
         if share > 0:  # where the fill has no value the spline alone
             here, there = out[a:b + 1, p], smooth
             out[a:b + 1, p] = np.where(np.isnan(here), there, (1 - share) * here + share * there)
@@ -890,8 +898,8 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     return out, joined
 
 
-def _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, rigid_alone, report):
-    """``out`` with the frames of its gaps longer than :data:`AUTO_SPLINE_SECONDS` blended
+def _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, rigid_alone, report, cfg):
+    """``out`` with the frames of its gaps longer than ``spline_seconds`` blended
     towards ``spline`` (a cubic spline of each point through the take; ``hidden_spline``: the
     same with the copies ``probe`` hidden) near their ends.
 
@@ -901,16 +909,16 @@ def _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, rigid_a
     with every frame). The spline's error grows fast with the distance from the ends, so its
     share is a weight per distance class (:func:`~.stacking.classes`): the least-squares share
     of the spline against ``copies`` (the same estimate made for the copies ``probe`` of the
-    gaps) on the copies' frames at that distance, ridge :data:`AUTO_ENDS_RIDGE` towards none,
-    never rising with the distance, none below :data:`AUTO_ENDS_LEAST` or where too few copied
+    gaps) on the copies' frames at that distance, ridge ``ends_ridge`` towards none,
+    never rising with the distance, none below ``ends_least`` or where too few copied
     frames lie that far in. Points carried by their rigid partners alone (``rigid_alone``) and
     the others get weights of their own. Only gaps with both ends in the take, of points with a
     copy as long as the gap, take part: copies shorter than the gap (a limb gone for half the
     take) do not show how a spline strays over it."""
     from .stacking import DISTANCES, classes
 
-    shortest = _spline_frames(motion.fps)
-    gaps = _longer_gaps(motion.missing, motion.fps)
+    shortest = _spline_frames(motion.fps, cfg)
+    gaps = _longer_gaps(motion.missing, motion.fps, cfg)
     if not gaps:  # e.g. a take of short dropouts only: no spline of the copies to make
         return out
     # per class of point and distance: spline-minus-estimate times error, its square, frames
@@ -930,20 +938,20 @@ def _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, rigid_a
     table = np.zeros((2, len(DISTANCES)))
     for c in range(2):
         product, square, frames = sums[:, c]
-        enough = np.flatnonzero(frames >= AUTO_ENDS_SAMPLES)
+        enough = np.flatnonzero(frames >= cfg.ends_samples)
         if not len(enough):
             continue
         # classes nearer than any frame at this rate take the first one's weight; from the first
         # class after it without enough copied frames on, none
-        short = np.flatnonzero((frames < AUTO_ENDS_SAMPLES)
+        short = np.flatnonzero((frames < cfg.ends_samples)
                                & (np.arange(len(frames)) > enough[0]))
         stop = short[0] if len(short) else len(frames)
         with np.errstate(invalid="ignore", divide="ignore"):
-            w = np.clip(np.nan_to_num(product / (square * (1 + AUTO_ENDS_RIDGE))), 0, 1)
+            w = np.clip(np.nan_to_num(product / (square * (1 + cfg.ends_ridge))), 0, 1)
         w[:enough[0]] = w[enough[0]]
         w[stop:] = 0.0
         w = np.minimum.accumulate(w)
-        table[c] = np.where(w < AUTO_ENDS_LEAST, 0.0, w)
+        table[c] = np.where(w < cfg.ends_least, 0.0, w)
     out = out.copy()
     leaned = 0
     for p, a, b in gaps:
@@ -960,11 +968,11 @@ def _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, rigid_a
     return out
 
 
-def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
+def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report, cfg):
     """``out`` with each gap blended with a cubic spline of its point through the take
     (:func:`~.baselines.fill_spline`) and its pattern fill (:func:`~.baselines.fill_pattern`, at
-    :data:`AUTO_PATTERN_WEIGHT`) by inverse errors per sample: the spline's and the pattern's on up
-    to :data:`AUTO_SPLINE_COPIES` copies of the gap itself (same point, same length, the nearest
+    ``pattern_weight``) by inverse errors per sample: the spline's and the pattern's on up
+    to ``spline_copies`` copies of the gap itself (same point, same length, the nearest
     frames where it is observed), ``out``'s on the point's copies (``e_out``, per point; NaN
     where it has none, infinite where ``out`` left some of them open) or, where
     ``rigid_alone`` says the rigid estimate fills the point alone, that estimate's
@@ -972,28 +980,28 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     copies; ``spline`` is that spline of the take. Over a few frames a point moves along a
     smooth curve that the spline follows within a millimetre, closer than any estimate carried from
     other points; over longer gaps its error grows fast, with a tail its copies do not foresee, so
-    only gaps of up to :data:`AUTO_SPLINE_SECONDS` take part. Gaps at the take's ends (no spline
+    only gaps of up to ``spline_seconds`` take part. Gaps at the take's ends (no spline
     across them: :func:`_with_pattern_ends`) and points without copies keep ``out``;
     the pattern joins only where a partner spans the gap and each of its copies. Where more
-    than :data:`AUTO_BODY_GONE` of the points are gone over the gap, ``out``'s error is taken
-    :data:`AUTO_GONE_DOUBT` times over (its copies saw more of the body). Returns the
+    than ``body_gone`` of the points are gone over the gap, ``out``'s error is taken
+    ``gone_doubt`` times over (its copies saw more of the body). Returns the
     blend and, per gap blended (``(point, first frame)``), the spline's and the pattern's shares
     and the blend's expected squared error (the errors as if independent)."""
     from .baselines import fill_pattern
 
     missing = motion.missing
-    smooth = _smooth_of(motion)
+    smooth = _smooth_of(motion, cfg)
     # copy k of every gap goes into round k: copies of one round never meet, those of one gap
-    # never overlap, and all lie within AUTO_SPLINE_REACH gap lengths of their gap
-    rounds, copies = np.zeros((AUTO_SPLINE_COPIES,) + missing.shape, bool), []
+    # never overlap, and all lie within spline_reach gap lengths of their gap
+    rounds, copies = np.zeros((cfg.spline_copies,) + missing.shape, bool), []
     for p, a, b in gap_runs(missing):
         if (a == 0 or b == len(missing) - 1 or np.isnan(e_out[p])
-                or b - a + 1 > _spline_frames(motion.fps)):
+                or b - a + 1 > _spline_frames(motion.fps, cfg)):
             continue
         length, own, starts = b - a + 1, missing[:, p].copy(), []
         for k, hidden in enumerate(rounds):
-            start = _copy_start(own | hidden[:, p], a, length, AUTO_SPLINE_MARGIN,
-                                AUTO_SPLINE_REACH * (length + AUTO_SPLINE_MARGIN))
+            start = _copy_start(own | hidden[:, p], a, length, cfg.spline_margin,
+                                cfg.spline_reach * (length + cfg.spline_margin))
             if start is not None:
                 hidden[start:start + length, p] = own[start:start + length] = True
                 starts.append((k, start))
@@ -1027,12 +1035,12 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
             e_here = e_rigid if np.isfinite(e_rigid) else e_here
         if not (np.isfinite(e_pattern) and np.isfinite(pattern[a:b + 1, p]).all()):
             e_pattern = np.inf  # no donor spans the gap or one of its copies
-        e_here = _off_the_spline(out, spline, missing, p, a, b, e_here, e_spline)
-        e_pattern = _off_the_spline(pattern, spline, missing, p, a, b, e_pattern, e_spline)
-        if _body_gone(missing, a, b):  # the fill's copies saw more of the body
-            e_here *= AUTO_GONE_DOUBT
+        e_here = _off_the_spline(out, spline, missing, p, a, b, e_here, e_spline, cfg)
+        e_pattern = _off_the_spline(pattern, spline, missing, p, a, b, e_pattern, e_spline, cfg)
+        if _body_gone(missing, a, b, cfg.body_gone):  # the fill's copies saw more of the body
+            e_here *= cfg.gone_doubt
         w, squared = _weigh_in(out, p, a, b, (spline, pattern), (e_here, e_spline, e_pattern),
-                               (1.0, 1.0, AUTO_PATTERN_WEIGHT))
+                               (1.0, 1.0, cfg.pattern_weight))
         shares[p, a] = w[1], w[2], squared
     eased = sum(spline_share >= 0.5 for spline_share, _, _ in shares.values())
     patterned = sum(pattern_share >= 0.25 for _, pattern_share, _ in shares.values())
@@ -1043,74 +1051,74 @@ def _with_spline(motion, out, spline, e_out, rigid_alone, rigid_of, report):
     return out, shares
 
 
-def _smooth_of(motion):
+def _smooth_of(motion, cfg):
     """The smooth track through the take's gaps that ``auto`` weighs, ``smooth(positions,
     only)`` of positions with NaN gaps: a cubic spline of each point
-    (:func:`~.baselines.fill_spline`), :data:`AUTO_LEARNED` of the way on to the take's own
+    (:func:`~.baselines.fill_spline`), ``learned`` of the way on to the take's own
     interpolator (:func:`~.baselines.fill_learned`) on the gaps that start in ``only`` and last
-    at most :data:`AUTO_LEARNED_SECONDS`."""
+    at most ``learned_seconds``."""
     def smooth(positions, only):
         spline = baselines.fill_spline(positions)
-        if not AUTO_LEARNED or not only.any():
+        if not cfg.learned or not only.any():
             return spline
         learned = baselines.fill_learned(positions, spline, only,
-                                         longest=AUTO_LEARNED_SECONDS * motion.fps)
-        return spline + AUTO_LEARNED * (learned - spline)
+                                         longest=cfg.learned_seconds * motion.fps)
+        return spline + cfg.learned * (learned - spline)
 
     return smooth
 
 
-def _learnt(missing, probe, fps):
+def _learnt(missing, probe, fps, cfg):
     """Where ``auto``'s smooth track takes in the take's own interpolator (:func:`_smooth_of`),
     the gaps of ``missing`` and the copies ``probe`` ((frames, points) bool, at their first
-    frames): every one of up to :data:`AUTO_SPLINE_SECONDS`, and a longer gap where more than
-    :data:`AUTO_BODY_GONE` of the points are gone (over half a second with few points gone its
+    frames): every one of up to ``spline_seconds``, and a longer gap where more than
+    ``body_gone`` of the points are gone (over half a second with few points gone its
     copies vouched for it more than the gaps bore out), with the longer copies of its point."""
-    shortest = _spline_frames(fps)
+    shortest = _spline_frames(fps, cfg)
     gaps, copies = np.zeros_like(missing), np.zeros_like(probe)
     gone = np.zeros(missing.shape[1], bool)
     for p, a, b in gap_runs(missing):
-        gaps[a, p] = b - a + 1 <= shortest or _body_gone(missing, a, b)
+        gaps[a, p] = b - a + 1 <= shortest or _body_gone(missing, a, b, cfg.body_gone)
         gone[p] |= b - a + 1 > shortest and gaps[a, p]
     for p, a, b in gap_runs(probe):
         copies[a, p] = b - a + 1 <= shortest or gone[p]
     return gaps, copies
 
 
-def _body_gone(missing, a, b, share=AUTO_BODY_GONE):
+def _body_gone(missing, a, b, share):
     """Whether more than ``share`` of the points are gone on the mean over the frames ``a``-``b``
     (a subject half out of the volume, a prop in the way, a dropped frame)."""
     return bool(missing[a:b + 1].mean() > share)
 
 
-def _off_the_spline(estimate, spline, missing, p, a, b, e_estimate, e_spline):
+def _off_the_spline(estimate, spline, missing, p, a, b, e_estimate, e_spline, cfg):
     """``estimate``'s expected squared error per sample on the gap ``a``-``b`` of point ``p``
-    (``e_estimate``, from copies), raised where more than :data:`AUTO_BODY_GONE` of the points
+    (``e_estimate``, from copies), raised where more than ``body_gone`` of the points
     are gone on the mean over the gap (``missing``: the take's) to at least the
-    square of its RMS distance from ``spline`` less :data:`AUTO_OFF_SPLINE` times the spline's
+    square of its RMS distance from ``spline`` less ``off_spline`` times the spline's
     own expected RMS error (``e_spline``: squared, per sample): by the triangle inequality it is
     off by about that much, whatever its copies said. With most of the body gone the partners
     left are far and the knowledge base's models see little, so copies taken where more was
     seen vouch for it less than for the spline, which needs nothing but the point's own track
     (on bursts of the tuning takes the fill strayed 4-9 times further than its copies
     foretold)."""
-    if not (np.isfinite(e_estimate) and _body_gone(missing, a, b)):
+    if not (np.isfinite(e_estimate) and _body_gone(missing, a, b, cfg.body_gone)):
         return e_estimate
     squared = np.sum((estimate[a:b + 1, p] - spline[a:b + 1, p]) ** 2, axis=1)
     known = np.isfinite(squared)
     if not known.any():
         return e_estimate
     apart = np.sqrt(squared[known].mean())
-    return max(e_estimate, max(apart - AUTO_OFF_SPLINE * np.sqrt(e_spline), 0.0) ** 2)
+    return max(e_estimate, max(apart - cfg.off_spline * np.sqrt(e_spline), 0.0) ** 2)
 
 
-def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
-    """``out`` with each gap of up to :data:`AUTO_SPLINE_SECONDS` at a clip end (no observation
+def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report, cfg):
+    """``out`` with each gap of up to ``spline_seconds`` at a clip end (no observation
     on one side: no spline across it) blended with its pattern fill from the one end
-    (:func:`~.baselines.fill_pattern`, at :data:`AUTO_PATTERN_WEIGHT`) and, on a marker set, the
+    (:func:`~.baselines.fill_pattern`, at ``pattern_weight``) and, on a marker set, the
     take's own interpolator from its one key (:func:`~.baselines.fill_learned_ends`, at
-    :data:`AUTO_LEARNED_ENDS_WEIGHT`) by inverse errors per sample: theirs on up to
-    :data:`AUTO_SPLINE_COPIES` one-sided copies of the gap (the
+    ``learned_ends_weight``) by inverse errors per sample: theirs on up to
+    ``spline_copies`` one-sided copies of the gap (the
     point hidden from the copy to the same clip end, so each copy has the one end its gap has,
     at the nearest frames where it is observed), ``out``'s on the point's copies (``e_out``) or,
     where ``rigid_alone`` says the rigid estimate fills the point alone, that estimate's
@@ -1123,8 +1131,8 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
 
     missing = motion.missing
     frames = len(missing)
-    shortest = _spline_frames(motion.fps)
-    rounds = np.zeros((AUTO_SPLINE_COPIES,) + missing.shape, bool)  # hidden, per round
+    shortest = _spline_frames(motion.fps, cfg)
+    rounds = np.zeros((cfg.spline_copies,) + missing.shape, bool)  # hidden, per round
     copies, ends = [], np.zeros_like(missing)
     for p, a, b in gap_runs(missing):
         length = b - a + 1
@@ -1132,9 +1140,9 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
             continue
         ends[a:b + 1, p] = True
         seen, starts = ~missing[:, p], []
-        shift = length + AUTO_SPLINE_MARGIN
-        reach = AUTO_SPLINE_REACH * shift
-        while len(starts) < AUTO_SPLINE_COPIES and shift <= reach and shift + length < frames:
+        shift = length + cfg.spline_margin
+        reach = cfg.spline_reach * shift
+        while len(starts) < cfg.spline_copies and shift <= reach and shift + length < frames:
             lo = shift if a == 0 else frames - shift - length
             key = lo + length if a == 0 else lo - 1
             k = len(starts)
@@ -1142,7 +1150,7 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
                 rounds[k, :lo + length, p] |= a == 0
                 rounds[k, lo:, p] |= a > 0
                 starts.append((k, lo))
-                shift += length + AUTO_SPLINE_MARGIN
+                shift += length + cfg.spline_margin
             else:
                 shift += 1
         if starts:
@@ -1157,7 +1165,7 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
     learned = learned_error = None
     carried = np.zeros_like(ends)  # the gaps short enough for it, at their first frames
     for p, a, b, _ in copies:
-        carried[a, p] = b - a + 1 <= AUTO_LEARNED_ENDS_SECONDS * motion.fps
+        carried[a, p] = b - a + 1 <= cfg.learned_ends_seconds * motion.fps
     # (a skeleton's joints lost by it: docs/METHOD_NOTES.md, session 65)
     if motion.parents is None and carried.any():
         learned = fill_learned_ends(motion.positions, only=carried)
@@ -1182,7 +1190,7 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
         if np.isinf(e_pattern) and np.isinf(e_learned):
             continue
         w, squared = _weigh_in(out, p, a, b, (learned, pattern), (e_here, e_learned, e_pattern),
-                               (1.0, AUTO_LEARNED_ENDS_WEIGHT, AUTO_PATTERN_WEIGHT))
+                               (1.0, cfg.learned_ends_weight, cfg.pattern_weight))
         shares[p, a] = w[1], w[2], squared
     learnt = sum(learned_share >= 0.25 for learned_share, _, _ in shares.values())
     patterned = sum(pattern_share >= 0.25 for _, pattern_share, _ in shares.values())
@@ -1193,19 +1201,19 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report):
     return out, shares
 
 
-def _with_all_gone_learnt(motion, out, report):
+def _with_all_gone_learnt(motion, out, report, cfg):
     """``out`` with each marker gap where nearly all of the body is gone at once
-    (:data:`AUTO_ALL_GONE`; longer than :data:`AUTO_SPLINE_SECONDS`, of up to
-    :data:`AUTO_LEARNED_SECONDS`, both ends in the take) moved :data:`AUTO_ALL_GONE_SHARE` of the
+    (``all_gone``; longer than ``spline_seconds``, of up to
+    ``learned_seconds``, both ends in the take) moved ``all_gone_share`` of the
     way on to the take's own interpolator (:func:`~.baselines.fill_learned`; a cubic spline where
     the take has too few windows), and the set of those gaps (``(point, first frame)``). A
     skeleton's joints keep their fill (not measured there)."""
-    if motion.parents is not None or not AUTO_ALL_GONE_SHARE:
+    if motion.parents is not None or not cfg.all_gone_share:
         return out, set()
     missing = motion.missing
-    gaps = {(p, a): b for p, a, b in _longer_gaps(missing, motion.fps)
-            if b - a + 1 <= AUTO_LEARNED_SECONDS * motion.fps
-            and _body_gone(missing, a, b, AUTO_ALL_GONE)}
+    gaps = {(p, a): b for p, a, b in _longer_gaps(missing, motion.fps, cfg)
+            if b - a + 1 <= cfg.learned_seconds * motion.fps
+            and _body_gone(missing, a, b, cfg.all_gone)}
     if not gaps:
         return out, set()
     only = np.zeros_like(missing)
@@ -1214,13 +1222,13 @@ def _with_all_gone_learnt(motion, out, report):
     learned = baselines.fill_learned(motion.positions, only=only)
     out = out.copy()
     for (p, a), b in gaps.items():
-        out[a:b + 1, p] += AUTO_ALL_GONE_SHARE * (learned[a:b + 1, p] - out[a:b + 1, p])
+        out[a:b + 1, p] += cfg.all_gone_share * (learned[a:b + 1, p] - out[a:b + 1, p])
     report(f"auto: {len(gaps)} gaps where nearly all of the body is gone go "
-           f"{AUTO_ALL_GONE_SHARE:.0%} of the way on to the take's own interpolator")
+           f"{cfg.all_gone_share:.0%} of the way on to the take's own interpolator")
     return out, set(gaps)
 
 
-def _with_holes_splined(motion, out, report):
+def _with_holes_splined(motion, out, report, cfg):
     """``out`` with the holes no estimate reached filled by a cubic spline through the point's
     values (seen and filled; :func:`_smooth_of`): runs of a point's missing frames where ``out``
     has no value, with a value on both sides. There no knowledge base models the point (none
@@ -1236,7 +1244,7 @@ def _with_holes_splined(motion, out, report):
     if not inside.any():
         return out, []
     known = np.where(missing[..., None], out, motion.positions)
-    out = np.where(inside[..., None], _smooth_of(motion)(known, inside), out)
+    out = np.where(inside[..., None], _smooth_of(motion, cfg)(known, inside), out)
     alone = [(p, a) for p, a, b in gap_runs(missing) if inside[a:b + 1, p].all()]
     runs = gap_runs(inside)
     report(f"auto: {len(runs)} hole{'s' if len(runs) > 1 else ''} no other estimate reached "
@@ -1270,17 +1278,17 @@ def _weigh_in(out, p, a, b, others, errors, weights):
     return w, float(np.sum(w[w > 0] ** 2 * errors[w > 0]))
 
 
-def _spline_frames(fps):
+def _spline_frames(fps, cfg):
     """The longest gap (frames) that ``auto`` scores against a spline through the take:
-    :data:`AUTO_SPLINE_SECONDS`."""
-    return round(AUTO_SPLINE_SECONDS * fps)
+    ``spline_seconds``."""
+    return round(cfg.spline_seconds * fps)
 
 
-def _carried_closely(missing, spread, within, fps):
+def _carried_closely(missing, spread, within, fps, cfg):
     """The missing samples whose rigid donors keep within ``within`` (metres, RMS spread) of
-    them, in gaps longer than :data:`AUTO_SPLINE_SECONDS` (shorter ones are scored against a
+    them, in gaps longer than ``spline_seconds`` (shorter ones are scored against a
     spline through the take, :func:`_with_spline`, on their own copies)."""
-    shortest = _spline_frames(fps)
+    shortest = _spline_frames(fps, cfg)
     longer = np.zeros_like(missing)
     for p, a, b in gap_runs(missing):
         longer[a:b + 1, p] = b - a + 1 > shortest
@@ -1293,7 +1301,7 @@ def _joined(e_kb, e_other, ramp=None):
     point, squared errors ``e_kb`` and ``e_other``; inf: none): its share (0 where neither has a
     finite error) and the joined estimate's expected error. With ``ramp`` it joins only where
     it refilled the copies better, its share opening from 0 at equal errors to the full inverse
-    error share where that share is ``ramp`` above one half (:data:`AUTO_JOIN_RAMP`)."""
+    error share where that share is ``ramp`` above one half (``join_ramp``)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.nan_to_num((1.0 / e_other) / (1.0 / e_kb + 1.0 / e_other))
         if ramp is not None:
@@ -1316,14 +1324,14 @@ def _offset_variance(missing, donors):
     return out
 
 
-def _spread_floor(missing, probe, spread):
+def _spread_floor(missing, probe, spread, cfg):
     """Per point, the least squared error (summed over its copies) of the rigid estimate where
-    its copies are shorter than its gaps (:data:`AUTO_SPREAD_CAP`); 0 elsewhere."""
+    its copies are shorter than its gaps (``spread_cap``); 0 elsewhere."""
     with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # points with no spread: nan
         longer = np.clip(_mean_run(missing) / _mean_run(probe) - 1, 0, 1)
         mean = np.nanmean(np.where(missing, spread ** 2, np.nan), axis=0)
-    return np.nan_to_num(AUTO_SPREAD_CAP * longer * mean * probe.sum(axis=0))
+    return np.nan_to_num(cfg.spread_cap * longer * mean * probe.sum(axis=0))
 
 
 def _mean_run(mask):

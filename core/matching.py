@@ -214,7 +214,7 @@ POSE_CHUNK = 4.0
 #: seen well at 30 poses; the cost grows with the square of the rate)
 POSE_FPS = 30.0
 #: the take itself is searched beside the knowledge base wherever it shows the points a
-#: stretch lacks (the same subject and style; the armatures' ``bonefill.MATCH_OWN``)
+#: stretch lacks (the same subject and style; the armatures' ``BoneConfig.match_own``)
 POSE_OWN = True
 
 

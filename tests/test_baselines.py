@@ -385,7 +385,7 @@ def test_rigid_estimate_reaches_past_the_gap_ends_when_many_markers_are_gone(dat
     carries the point from the nearest frames where they are seen; weighed with the estimate
     from the ends it is much closer than the ends alone (48.9 -> 38.0 mm when written)."""
     from mocap_gapfill.core.evaluate import punch_gaps
-    from mocap_gapfill.core.fill import AUTO_REACH
+    from mocap_gapfill.core.fill import AutoConfig
     from mocap_gapfill.core.motion import gap_runs
 
     take = read_motion(data_dir / "cmu/c3d/02_05.c3d")
@@ -395,11 +395,12 @@ def test_rigid_estimate_reaches_past_the_gap_ends_when_many_markers_are_gone(dat
     miss = punch_gaps(take.n_frames, take.n_points, "markers", 0.3, np.random.default_rng(0))
     gappy = with_gaps(take, miss).positions
     scores = {reach: rmse_mm(take.replace(positions=baselines.rigid_estimates(
-        gappy, weighted=True, reach=reach)[0]), take, miss) for reach in (None, AUTO_REACH)}
+        gappy, weighted=True, reach=reach)[0]), take, miss)
+        for reach in (None, AutoConfig.reach)}
     print(scores)
-    assert scores[AUTO_REACH] < 0.85 * scores[None]
+    assert scores[AutoConfig.reach] < 0.85 * scores[None]
     np.testing.assert_array_equal(
-        baselines.rigid_estimates(gappy, reach=AUTO_REACH)[0][~miss], gappy[~miss])
+        baselines.rigid_estimates(gappy, reach=AutoConfig.reach)[0][~miss], gappy[~miss])
 
     # every gap of a point is fitted in one batch: a gap estimated alone (``only``) comes out
     # the same, and the gaps outside ``only`` are left unfilled
@@ -407,8 +408,8 @@ def test_rigid_estimate_reaches_past_the_gap_ends_when_many_markers_are_gone(dat
     only = np.zeros_like(miss)
     for p, a, b in runs[::7]:
         only[a:b + 1, p] = True
-    full = baselines.rigid_estimates(gappy, weighted=True, reach=AUTO_REACH)
-    part = baselines.rigid_estimates(gappy, weighted=True, reach=AUTO_REACH, only=only)
+    full = baselines.rigid_estimates(gappy, weighted=True, reach=AutoConfig.reach)
+    part = baselines.rigid_estimates(gappy, weighted=True, reach=AutoConfig.reach, only=only)
     for got, want in zip(part, full):
         np.testing.assert_array_equal(got[only], want[only])
     assert np.isnan(part[0][miss & ~only]).all() and np.isnan(part[1][miss & ~only]).all()

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mocap_gapfill.core import bonefill, stacking
-from mocap_gapfill.core.bonefill import carry_subtrees, fill_bones, gap_copies
+from mocap_gapfill.core.bonefill import BoneConfig, carry_subtrees, fill_bones, gap_copies
 from mocap_gapfill.core.errors import GapFillError, ParseError
 from mocap_gapfill.core.evaluate import bone_errors, kb_without, punch_bone_gaps
 from mocap_gapfill.core.formats.asfamc import parse_asf
@@ -144,7 +144,7 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, sou
     """Walk 07_05 (its subject out of the KB): a limb or spine bone loses its keys over every
     other stretch of 30 and of 120 frames. The default (auto: motion matching in rotation space,
     chosen per gap on copies of it, with the share of the way from the interpolation) beats the
-    interpolation on the short gaps (measured 7.6 vs 8.5 mm; 7.4 before session 50's AUTO_WARY)
+    interpolation on the short gaps (measured 7.6 vs 8.5 mm; 7.4 before session 50's ``auto_wary``)
     and by far on the long ones (32.9 vs 110.9 mm, 42.5 before session 47's mean of `match` and
     `regress_kernel` for long gaps no copy fits; the bar: 0.7x), no gap comes out more than
     twice as bad + 5 mm, at most one in eight worse than 10 % + 2 mm (measured: 0 of 8, 0 of 2;
@@ -183,8 +183,8 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, sou
             assert kept == ((c.method == "interp" or c.share == 0) and not c.corroborated
                             and not c.cubic and not c.learnt and not c.consensus), c
             # the thresholds are on squared errors, the estimate on RMS ones
-            bar = np.sqrt(bonefill.PROMOTE if length >= bonefill.LONG_GAP * fps else (
-                bonefill.PROMOTE_SHORT_WHOLE if c.share == 1 else bonefill.PROMOTE_SHORT))
+            bar = np.sqrt(BoneConfig.promote if length >= BoneConfig.long_gap * fps else (
+                BoneConfig.promote_short_whole if c.share == 1 else BoneConfig.promote_short))
             # the copies' verdict where they gave one (a take too short for copies of its long
             # gaps takes match unjudged)
             assert np.isnan(c.estimate) or (c.method != "interp" and 0 < c.estimate < bar), c
@@ -228,7 +228,7 @@ def test_auto_in_a_take_without_copies_keeps_the_interpolation_where_it_and_regr
     kb = kb_without_13
     gaps = np.zeros(channels.shape[:2], dtype=bool)
     gaps[240:480, rig.names.index("lThigh")] = gaps[720:960, rig.names.index("lThigh")] = True
-    assert not gap_copies(gaps, bonefill.AUTO_COPIES, bonefill.COPY_MARGIN)
+    assert not gap_copies(gaps, BoneConfig.auto_copies, BoneConfig.copy_margin)
     seen = interpolate_channels(channels, gaps)
     truth = basis_matrices(rig, channels, location)
     auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=kb, return_choices=True)
@@ -253,7 +253,7 @@ def test_auto_in_a_take_without_copies_takes_the_mean_of_match_and_regress_kerne
         data_dir / "cmu/bvh/daz_friendly/08/08_01.bvh.gz", skip_frames=6)
     gaps = punch_bone_gaps(rig, len(channels), (1, 120))
     assert [(rig.names[b], a, e) for b, a, e in gap_runs(gaps)] == [("rForeArm", 120, 239)]
-    assert not gap_copies(gaps, bonefill.AUTO_COPIES, bonefill.COPY_MARGIN)
+    assert not gap_copies(gaps, BoneConfig.auto_copies, BoneConfig.copy_margin)
     seen = interpolate_channels(channels, gaps)
     truth = basis_matrices(rig, channels, location)
     kb = kb_without(daz_rotation_kb, "08")
@@ -270,7 +270,7 @@ def test_auto_in_a_take_without_copies_takes_the_mean_of_match_and_regress_kerne
 
 
 def test_auto_a_long_gap_with_few_copies_of_its_own_takes_the_long_stack_then_the_consensus(
-        data_dir, kb_without_13, monkeypatch):
+        data_dir, kb_without_13):
     """CMU 13_37 (12 s) with the left thigh's keys deleted over two 2 s stretches and the
     head's over a third (the bones protocol's gaps, n=1, l=240): one copy of the first thigh
     gap fits the take and none of the second, so their verdicts leaned on the head's copies and
@@ -283,21 +283,20 @@ def test_auto_a_long_gap_with_few_copies_of_its_own_takes_the_long_stack_then_th
     gaps = np.zeros(channels.shape[:2], dtype=bool)
     thigh, head = rig.names.index("lThigh"), rig.names.index("head")
     gaps[240:480, thigh] = gaps[720:960, thigh] = gaps[1200:1440, head] = True
-    own = [sum(c[0] == i for c in gap_copies(gaps, bonefill.AUTO_COPIES, bonefill.COPY_MARGIN))
+    own = [sum(c[0] == i for c in gap_copies(gaps, BoneConfig.auto_copies, BoneConfig.copy_margin))
            for i in range(3)]
     assert own == [3, 1, 0]  # gap_runs order: the head's gap first
     seen = interpolate_channels(channels, gaps)
     truth = basis_matrices(rig, channels, location)
 
-    def mm(method):
+    def mm(method, **config):
         return bone_errors(rig, fill_bones(rig, seen, location, gaps, fps, kb=kb_without_13,
-                                           method=method), truth, gaps)["gaps_mm"]
+                                           method=method, config=BoneConfig(**config)),
+                           truth, gaps)["gaps_mm"]
 
     auto, interp = mm("auto"), mm("interp")
-    monkeypatch.setattr(bonefill, "CONSENSUS", 0.0)
-    alone = mm("auto")
-    monkeypatch.setattr(bonefill, "FEW_COPIES", np.inf)
-    judged = mm("auto")
+    alone = mm("auto", consensus=0.0)
+    judged = mm("auto", consensus=0.0, few_copies=np.inf)
     print(f"\n13_37: auto {np.round(auto, 1)} mm, without the consensus {np.round(alone, 1)}, "
           f"on the copies' verdict {np.round(judged, 1)}, interpolation {np.round(interp, 1)}")
     assert alone[0] == judged[0]
@@ -315,7 +314,7 @@ def test_root_gaps_and_bad_input(walk, daz_kb):
     # the cubic, on the rotations (the baseline `hermite` takes it on the channels)
     cubic = fill_bones(rig, channels, location, gaps, fps, method="hermite")
     cubic[..., :3, :3] = hermite_rotations(basis_matrices(rig, channels, location)[..., :3, :3],
-                                           gaps, bonefill.HERMITE_SECONDS * fps)
+                                           gaps, BoneConfig.hermite_seconds * fps)
     assert np.allclose(out, cubic)
     assert any("root" in s for s in said)
     with pytest.raises(GapFillError, match="knowledge base"):
@@ -416,7 +415,7 @@ def test_the_bones_own_windows_say_how_often_learn_would_lose_a_gap():
     often its own fit misses those joints by more than Blender's interpolation (10 % + 2 mm):
     never on a turn that speeds up steadily or wanders slowly (the keys foretell it), on about
     one window in fifteen where it wanders fast (measured: 0, 0, 0.068), which ``auto`` does not
-    trust (:data:`~bonefill.LEARN_TRUST`)."""
+    trust (:data:`~BoneConfig.learn_trust`)."""
     rest = np.tile(np.eye(4), (3, 1, 1))
     rest[1, :3, 3], rest[2, :3, 3] = [0, 0.5, 0], [0, 0.9, 0]
     rest[1, :3, :3] = Rotation.from_euler("z", 30, degrees=True).as_matrix()
@@ -444,7 +443,7 @@ def test_the_bones_own_windows_say_how_often_learn_would_lose_a_gap():
         assert len(set(losses.values())) == 1  # one share per bone and length
         shares.append(losses[1, 100, 114])
     assert shares[0] == shares[1] == 0.0
-    assert shares[2] > 2 * bonefill.LEARN_TRUST
+    assert shares[2] > 2 * BoneConfig.learn_trust
 
 
 def test_the_takes_own_interpolator_smooths_a_jittering_capture(data_dir, walk, daz_kb):
@@ -475,8 +474,7 @@ def test_the_takes_own_interpolator_smooths_a_jittering_capture(data_dir, walk, 
         assert any(c.method == "learn" for c in choices) == short
 
 
-def test_auto_takes_a_gap_a_little_too_long_for_learn_part_of_the_way_on_to_it(
-        walk, daz_kb, monkeypatch):
+def test_auto_takes_a_gap_a_little_too_long_for_learn_part_of_the_way_on_to_it(walk, daz_kb):
     """Gaps of 0.4-0.6 s with keys beyond their keys (the protocol's 60 frames at the walk's 120
     fps) go ``MID_LEARN`` of the way from ``auto``'s fill on to ``learn``: each says so
     (``consensus``, ``towards``), and the walk (a tuning take) fills better for it, losing no
@@ -490,10 +488,9 @@ def test_auto_takes_a_gap_a_little_too_long_for_learn_part_of_the_way_on_to_it(
         seen = interpolate_channels(channels, gaps)
         auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb,
                                    return_choices=True)
-        assert all((c.consensus, c.towards) == (bonefill.MID_LEARN, "learn") for c in choices)
-        with monkeypatch.context() as m:
-            m.setattr(bonefill, "MID_LEARN", 0.0)
-            before = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb)
+        assert all((c.consensus, c.towards) == (BoneConfig.mid_learn, "learn") for c in choices)
+        before = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb,
+                            config=BoneConfig(mid_learn=0.0))
         errors = {name: bone_errors(rig, fill, truth, gaps) for name, fill in (
             ("auto", auto), ("before", before),
             ("interp", basis_matrices(rig, seen, location)))}
@@ -540,7 +537,7 @@ def test_the_cubic_turns_the_bone_not_its_channels_near_gimbal_lock(data_dir, wa
         seen = interpolate_channels(channels, gaps)
         truth = basis_matrices(rig, channels, location)
         interp = basis_matrices(rig, seen, location)
-        damping = bonefill.HERMITE_SECONDS * fps
+        damping = BoneConfig.hermite_seconds * fps
         on_channels = basis_matrices(rig, hermite_channels(seen, gaps, damping), location)
         turned = interp.copy()
         turned[..., :3, :3] = hermite_rotations(interp[..., :3, :3], gaps, damping)
@@ -577,8 +574,8 @@ def test_regression_on_the_rest_of_the_body_fills_a_limb_it_moves_with(data_dir,
         for start in range(120, len(channels) - 240, 480):
             gaps[start:start + 120, rig.names.index(name)] = True
         seen = interpolate_channels(channels, gaps)
-        out, curved = (regress_channels(seen, gaps, fps, bonefill.REGRESS_LAGS,
-                                        bonefill.REGRESS_WINDOW, bonefill.REGRESS_RIDGE,
+        out, curved = (regress_channels(seen, gaps, fps, BoneConfig.regress_lags,
+                                        BoneConfig.regress_window, BoneConfig.regress_ridge,
                                         fixed=rig.roots, kernel=kernel) for kernel in (False, True))
         assert np.array_equal(out[~gaps], seen[~gaps])
         assert np.array_equal(curved[~gaps], seen[~gaps])
@@ -613,8 +610,8 @@ def test_regression_carries_a_bone_from_its_one_key_at_a_clip_end(walk):
         gaps[:120, b] = gaps[-120:, b] = True
         seen = interpolate_channels(channels, gaps)
         assert (seen[:120, b] == seen[120, b]).all()  # held
-        out = regress_channels(seen, gaps, fps, bonefill.REGRESS_LAGS, bonefill.REGRESS_WINDOW,
-                               bonefill.REGRESS_RIDGE, fixed=rig.roots, kernel=True)
+        out = regress_channels(seen, gaps, fps, BoneConfig.regress_lags, BoneConfig.regress_window,
+                               BoneConfig.regress_ridge, fixed=rig.roots, kernel=True)
         assert np.array_equal(out[~gaps], seen[~gaps])
         # next to the key within a twentieth of a radian on every channel
         assert np.abs(out[[119, -120], b] - seen[[120, -121], b]).max() < 0.05
@@ -668,7 +665,7 @@ def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, d
     stacked fills all agree keeps its share; the same fill where they scatter about it keeps
     a small part of it; a long gap keeps its fill untouched, ``stack_long`` too. A short gap
     whose copies expect the fill an error as large as its departure from the interpolation
-    comes back towards the interpolation (``AUTO_WARY``), all the way where the error is
+    comes back towards the interpolation (``BoneConfig.auto_wary``), all the way where the error is
     larger still; the long gap keeps its fill whatever its copies said."""
     rig, channels, location, fps = walk
     b = rig.names.index("lShldr")
@@ -689,12 +686,12 @@ def test_auto_goes_from_the_interpolation_only_as_far_as_its_fills_agree(walk, d
     away = 0.75 ** 2 * np.mean(np.sum((job.world(truth)[200:230, joints]
                                        - job.world(interp)[200:230, joints]) ** 2, axis=-1))
     assert away > 2e-5  # the blend departs from the interpolation (measured 7.4 mm RMS)
-    half = job._doubted(agree, runs, choice, [away / bonefill.AUTO_WARY / 2, 1.0])
+    half = job._doubted(agree, runs, choice, [away / BoneConfig.auto_wary / 2, 1.0])
     assert half[0] == ("match", pytest.approx(0.75 / 2)) and half[1] == ("match", 1.0)
-    assert job._doubted(agree, runs, choice, [away / bonefill.AUTO_WARY, 1.0])[0] == (
+    assert job._doubted(agree, runs, choice, [away / BoneConfig.auto_wary, 1.0])[0] == (
         "match", 0.0)
     assert job._doubted(agree, runs, choice, [away / 1e4, 1.0])[0][1] == pytest.approx(
-        0.75 * (1 - bonefill.AUTO_WARY / 1e4))
+        0.75 * (1 - BoneConfig.auto_wary / 1e4))
     off = truth.copy()
     off[gaps, :3, :3] = Rotation.from_rotvec([0.0, 0.0, 1.5]).as_matrix() @ truth[gaps, :3, :3]
     scatter = dict(agree, hermite=interp, regress=off)
@@ -712,8 +709,7 @@ def _joint_rmse(rig, truth, gaps):
                                                        axis=2)[unknown]))
 
 
-def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk, daz_kb,
-                                                                           monkeypatch):
+def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk, daz_kb):
     """``_Job._corroborated`` on the walk's real poses: where two of the stacked fills (the
     cubic, the take's regression, the knowledge base's motion) agree on a short gap and the third
     strays, the gap's part of the interpolation goes ``CORROBORATE`` of the way to their mean;
@@ -749,7 +745,7 @@ def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk,
     assert pairs[:2] == [("hermite", "regress")] * 2 and pairs[2] is None
     rows = slice(200, 230)
     out = bonefill._about(interp[rows, b], [(off[rows, b], 0.5)] + [
-        (truth[rows, b], bonefill.CORROBORATE * 0.5 / 2)] * 2)
+        (truth[rows, b], BoneConfig.corroborate * 0.5 / 2)] * 2)
     turn = Rotation.from_matrix(out[:, :3, :3]) * Rotation.from_matrix(
         interp[rows, b, :3, :3]).inv()
     want = (0.5 * (Rotation.from_matrix(off[rows, b, :3, :3])
@@ -768,10 +764,10 @@ def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk,
     rmse = _joint_rmse(rig, truth, gaps)
     auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, return_choices=True)
     assert any(c.corroborated for c in choices)
-    monkeypatch.setattr(bonefill, "CORROBORATE_LEARN", 0.0)
-    no_learn = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb)
-    monkeypatch.setattr(bonefill, "CORROBORATE", 0.0)
-    without = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb)
+    no_learn = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb,
+                          config=BoneConfig(corroborate_learn=0.0))
+    without = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb,
+                         config=BoneConfig(corroborate_learn=0.0, corroborate=0.0))
     base = rmse(basis_matrices(rig, seen, location))
     print(f"\n07_05, gaps of 15 frames: auto {rmse(auto):.2f} mm, without learn in the pairs "
           f"{rmse(no_learn):.2f}, without the pairs {rmse(without):.2f}, interpolation "
@@ -780,8 +776,7 @@ def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk,
     assert rmse(auto) < 0.9 * base
 
 
-def test_a_gap_at_a_clip_end_goes_to_the_consensus_where_its_two_fills_agree(walk, daz_kb,
-                                                                            monkeypatch):
+def test_a_gap_at_a_clip_end_goes_to_the_consensus_where_its_two_fills_agree(walk, daz_kb):
     """``_Job._ends_agreed`` on the walk's real poses: a gap at a clip end (Blender holds its one
     key) where the knowledge base's motion and the take's own regression agree goes all the way
     to their mean; where they lie as far apart as they depart from the held key, or the gap has
@@ -811,15 +806,15 @@ def test_a_gap_at_a_clip_end_goes_to_the_consensus_where_its_two_fills_agree(wal
     rmse = _joint_rmse(rig, truth, gaps)
     auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, return_choices=True)
     assert any(c.consensus == 1.0 and c.towards == "match + regress_kernel" for c in choices)
-    monkeypatch.setattr(bonefill, "ENDS_SHARE", 0.0)
-    without = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb)
+    without = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb,
+                         config=BoneConfig(ends_share=0.0))
     base = rmse(basis_matrices(rig, seen, location))
     print(f"\n07_05, clip ends, 3 bones for 1 s: auto {rmse(auto):.1f} mm, without the rule "
           f"{rmse(without):.1f}, held key {base:.1f}")
     assert rmse(auto) < 0.96 * rmse(without) < 0.5 * base
 
 
-def test_a_gap_with_two_keys_takes_the_fill_the_others_bear_out(walk, daz_kb, monkeypatch):
+def test_a_gap_with_two_keys_takes_the_fill_the_others_bear_out(walk, daz_kb):
     """``_Job._medoid`` on the walk's real poses: of the fill a gap got and the others of
     ``MEDOID_FILLS`` (each filling the take's gaps alone), the gap takes the one with the least
     summed distance to the rest; where the fill is that one (ties too), or the gap has one key,
@@ -837,12 +832,12 @@ def test_a_gap_with_two_keys_takes_the_fill_the_others_bear_out(walk, daz_kb, mo
     runs = gap_runs(gaps)
     both = [True, True, False]
     # three fills agree on the truth, the gap's own is the interpolation: the first of them
-    agree = {name: truth for name in bonefill.MEDOID_FILLS}
-    assert job._medoid(interp, agree, runs, both) == [bonefill.MEDOID_FILLS[0]] * 2 + [""]
+    agree = {name: truth for name in BoneConfig.medoid_fills}
+    assert job._medoid(interp, agree, runs, both) == [BoneConfig.medoid_fills[0]] * 2 + [""]
     assert job._medoid(interp, agree, runs, [False] * 3) == [""] * 3
     # the gap's own fill is the truth and one other agrees with it: it keeps its own (a tie
     # with that one included)
-    one = dict(agree, **{name: interp for name in bonefill.MEDOID_FILLS[1:]})
+    one = dict(agree, **{name: interp for name in BoneConfig.medoid_fills[1:]})
     assert job._medoid(truth, one, runs, both) == [""] * 3
     # a bone below, gapped over part of the same frames, is decided with it; elsewhere not
     c = rig.names.index("lForeArm")
@@ -851,7 +846,7 @@ def test_a_gap_with_two_keys_takes_the_fill_the_others_bear_out(walk, daz_kb, mo
     interp = basis_matrices(rig, interpolate_channels(channels, gaps), location)
     assert [rig.names[r[0]] for r in runs] == ["lShldr"] * 3 + ["lForeArm"] * 2
     assert sorted(map(sorted, job._chains(runs))) == [[0, 3], [1], [2], [4]]
-    first = bonefill.MEDOID_FILLS[0]
+    first = BoneConfig.medoid_fills[0]
     assert job._medoid(interp, agree, runs, [True, True, False, True, True]) == (
         [first] * 2 + [""] + [first] * 2)
     # (a group with a gap it may not decide keeps every gap's own)
@@ -866,8 +861,8 @@ def test_a_gap_with_two_keys_takes_the_fill_the_others_bear_out(walk, daz_kb, mo
                                trace=said.append,
                                return_choices=True)
     assert {c.medoid for c in choices} > {""} and any("lies nearer the other" in m for m in said)
-    monkeypatch.setattr(bonefill, "MEDOID_FILLS", ())
-    without, before = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, return_choices=True)
+    without, before = fill_bones(rig, seen, location, gaps, fps, kb=daz_kb, return_choices=True,
+                                 config=BoneConfig(medoid_fills=()))
     assert {c.medoid for c in before} == {""}
     base = rmse(basis_matrices(rig, seen, location))
     print(f"\n07_05, gaps of 30 frames: auto {rmse(auto):.1f} mm, without the rule "
@@ -876,7 +871,7 @@ def test_a_gap_with_two_keys_takes_the_fill_the_others_bear_out(walk, daz_kb, mo
 
 
 def test_a_take_whose_copies_favour_the_cubic_takes_it_on_the_short_gaps_it_kept(
-        data_dir, daz_rotation_kb, monkeypatch):
+        data_dir, daz_rotation_kb):
     """Where all the take's copies together favour the cubic over the interpolation (Daz 08_02,
     a tuning take, its subject out of the KB: they do; the ASF/AMC walk 07_05, whose keys are
     noisier: they do not), the part of each short gap ``auto`` kept of the interpolation goes
@@ -895,13 +890,13 @@ def test_a_take_whose_copies_favour_the_cubic_takes_it_on_the_short_gaps_it_kept
     auto, choices = fill_bones(rig, seen, location, gaps, fps, kb=kb, report=said.append,
                                trace=said.append,
                                return_choices=True)
-    short = [c for c in choices if c.last - c.first + 1 < bonefill.LONG_STACK * fps]
+    short = [c for c in choices if c.last - c.first + 1 < BoneConfig.long_stack * fps]
     pulled = [c.cubic / (1 - c.share) for c in short if c.share < 1]
-    assert pulled and 0 < pulled[0] <= bonefill.CUBIC_PULL and np.allclose(pulled, pulled[0])
+    assert pulled and 0 < pulled[0] <= BoneConfig.cubic_pull and np.allclose(pulled, pulled[0])
     assert all(c.cubic == 0 for c in short if c.share == 1)
     assert any(f"{pulled[0]:.0%} of the way on to the cubic" in s for s in said)
-    monkeypatch.setattr(bonefill, "CUBIC_PULL", 0.0)
-    without, before = fill_bones(rig, seen, location, gaps, fps, kb=kb, return_choices=True)
+    without, before = fill_bones(rig, seen, location, gaps, fps, kb=kb, return_choices=True,
+                                 config=BoneConfig(cubic_pull=0.0))
     assert all(c.cubic == 0 for c in before)
     errors = {name: bone_errors(rig, basis, truth, gaps) for name, basis in (
         ("auto", auto), ("without", without), ("interp", basis_matrices(rig, seen, location)),
@@ -916,7 +911,6 @@ def test_a_take_whose_copies_favour_the_cubic_takes_it_on_the_short_gaps_it_kept
     assert lost["auto"] <= lost["without"]
     # the ASF/AMC walk: its copies do not favour the cubic, nothing moves (no knowledge base:
     # the take's own fills, the cubic among them)
-    monkeypatch.setattr(bonefill, "CUBIC_PULL", 0.5)
     rig, channels, location, fps = read_rig_take(data_dir / "cmu/asfamc/07/07_05.amc")
     gaps = punch_bone_gaps(rig, len(channels), (1, 15))
     _, choices = fill_bones(rig, interpolate_channels(channels, gaps), location, gaps, fps,
@@ -1056,7 +1050,7 @@ def test_window_search_leaves_out_windows_that_lack_what_the_stretch_lacks():
     assert np.abs(mean - fair).max() < 1e-3 * scale
 
 
-def test_match_finds_the_bone_in_the_take_itself(data_dir, daz_rotation_kb, monkeypatch):
+def test_match_finds_the_bone_in_the_take_itself(data_dir, daz_rotation_kb):
     """Walk 02_05 (its subject out of the KB): one bone loses its keys for 1 s in every 4 s.
     The take keys that bone the rest of the time, same subject and style: ``match`` searches
     it beside the knowledge base, and is much closer than with the knowledge base alone
@@ -1073,8 +1067,8 @@ def test_match_finds_the_bone_in_the_take_itself(data_dir, daz_rotation_kb, monk
         seen = interpolate_channels(channels, gaps)
         unknown = rig.moved(gaps)
         for own in (True, False):
-            monkeypatch.setattr(bonefill, "MATCH_OWN", own)
-            filled = fill_bones(rig, seen, location, gaps, fps, kb=kb, method="match")
+            filled = fill_bones(rig, seen, location, gaps, fps, kb=kb, method="match",
+                                config=BoneConfig(match_own=own))
             squared[own].append(np.sum((rig.joints(filled) - joints) ** 2, axis=2)[unknown])
     rmse = {own: 1000 * np.sqrt(np.mean(np.concatenate(v))) for own, v in squared.items()}
     print(f"\n02_05, 1 s gaps: match {rmse[True]:.1f} mm, knowledge base alone {rmse[False]:.1f}")

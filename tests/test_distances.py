@@ -2,6 +2,8 @@
 one segment within millimetres), kept by the default fill: exact where the geometry allows, and
 what it is worth on a real skeleton and a real marker set."""
 
+from dataclasses import replace
+
 import numpy as np
 
 from mocap_gapfill.core import baselines
@@ -153,7 +155,7 @@ def test_auto_keeps_a_marker_sets_steady_distances_as_far_as_they_hold(data_dir,
     kept = fills.fill(query, "auto", kb=kb)
     short = np.zeros(miss.shape, bool)
     for p, a, b in gap_runs(miss):
-        short[a:b + 1, p] = b - a < fills._spline_frames(take.fps)
+        short[a:b + 1, p] = b - a < fills._spline_frames(take.fps, fills.AutoConfig())
     assert short.any() and (seen["after"][short] == seen["before"][short]).all()
     monkeypatch.setattr(fills, "_with_distances_kept", lambda motion, out, *rest: out)
     loose = fills.fill(query, "auto", kb=kb)
@@ -161,8 +163,7 @@ def test_auto_keeps_a_marker_sets_steady_distances_as_far_as_they_hold(data_dir,
     assert rmse_mm(kept, take, miss) < 0.85 * rmse_mm(loose, take, miss)
 
 
-def test_a_markers_isolated_gaps_aim_at_its_partners_distances_about_the_gap(data_dir,
-                                                                              monkeypatch):
+def test_a_markers_isolated_gaps_aim_at_its_partners_distances_about_the_gap(data_dir):
     """One marker gone at a time for a quarter of a second (the commonest real gap: the rest of
     the body seen), CMU tuning take 02_05 at 60 fps, a KB of 06_01 and 135_02. The distances to
     a marker's partners on its segment drift as the joints turn; moved towards the take's mean
@@ -170,8 +171,8 @@ def test_a_markers_isolated_gaps_aim_at_its_partners_distances_about_the_gap(dat
     half of the way to each pair's own distance about the gap it does not (when written: 2.19
     mm, 2.37 with the mean alone, `rigid` 2.43; on the four CMU tuning takes' isolated gaps of
     0.25 s, 0.950 of the mean alone; measured with a pair's variance as it is at a seen end,
-    ``AUTO_KEPT_SEEN`` 1, as here)."""
-    monkeypatch.setattr(fills, "AUTO_KEPT_SEEN", 1.0)
+    ``kept_seen`` 1, as here)."""
+    config = fills.AutoConfig(kept_seen=1.0)
     c3d = data_dir / "cmu/c3d"
     kb = build_kb([c3d / "06_01.c3d", c3d / "135_02.c3d"], fps=60.0)
     take = complete_take(read_motion(c3d / "02_05.c3d"), kb.names, 60.0)
@@ -182,20 +183,19 @@ def test_a_markers_isolated_gaps_aim_at_its_partners_distances_about_the_gap(dat
     query = with_gaps(take, miss)
     messages = []
     local = rmse_mm(fills.fill(query, "auto", kb=kb, report=messages.append,
-                               trace=messages.append), take, miss)
+                               trace=messages.append, config=config), take, miss)
     assert any("50% of the way to its own distance about the gap" in m for m in messages)
-    monkeypatch.setattr(fills, "AUTO_KEPT_LOCAL", 0.0)
-    mean = rmse_mm(fills.fill(query, "auto", kb=kb), take, miss)
+    mean = rmse_mm(fills.fill(query, "auto", kb=kb, config=replace(config, kept_local=0.0)),
+                   take, miss)
     rigid = rmse_mm(fills.fill(query, "rigid"), take, miss)
     print(local, mean, rigid)
     assert local < 0.96 * mean and local < 0.95 * rigid
 
 
-def test_a_marker_alone_in_a_gap_trusts_its_seen_partners_distances_half_as_much(data_dir,
-                                                                                 monkeypatch):
+def test_a_marker_alone_in_a_gap_trusts_its_seen_partners_distances_half_as_much(data_dir):
     """A marker alone in a gap has every partner seen: the rigid estimate placed it among them,
     and a pair's distance is a second opinion of the same thing; at a frame where one of a
-    pair's ends is seen its variance counts twice (``AUTO_KEPT_SEEN``). CMU 01_01 (a tuning
+    pair's ends is seen its variance counts twice (``AutoConfig.kept_seen``). CMU 01_01 (a tuning
     take) at 120 fps, a KB of the other CMU tuning takes, one random marker gone for 30 frames
     in every 150 (when written: 2.94 mm against 3.02 with the variance as it is, `rigid` 3.66;
     on the four CMU tuning takes, docs/METHOD_NOTES.md session 72: 0.969 of before on such gaps,
@@ -210,8 +210,8 @@ def test_a_marker_alone_in_a_gap_trusts_its_seen_partners_distances_half_as_much
         miss[start:start + 30, rng.integers(take.n_points)] = True
     query = with_gaps(take, miss)
     twice = rmse_mm(fills.fill(query, "auto", kb=kb), take, miss)
-    monkeypatch.setattr(fills, "AUTO_KEPT_SEEN", 1.0)
-    once = rmse_mm(fills.fill(query, "auto", kb=kb), take, miss)
+    once = rmse_mm(fills.fill(query, "auto", kb=kb, config=fills.AutoConfig(kept_seen=1.0)),
+                   take, miss)
     rigid = rmse_mm(fills.fill(query, "rigid"), take, miss)
     print(twice, once, rigid)
     assert twice < 0.985 * once and twice < 0.85 * rigid

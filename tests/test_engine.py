@@ -9,8 +9,8 @@ from mocap_gapfill.core import baselines
 from mocap_gapfill.core.errors import GapFillError, ParseError
 from mocap_gapfill.core.evaluate import (complete_take, kb_without, punch_gaps, real_gaps,
                                          rmse_mm, subject_of, with_gaps)
-from mocap_gapfill.core.fill import (BASELINES, DEFAULT_METHOD, METHODS, TAKE_ALONE, fill,
-                                     kb_for_take, validation_gaps)
+from mocap_gapfill.core.fill import (BASELINES, DEFAULT_METHOD, METHODS, TAKE_ALONE, AutoConfig,
+                                     fill, kb_for_take, validation_gaps)
 from mocap_gapfill.core.io import read_motion
 from mocap_gapfill.core.kb import build_kb, load_kb, resample
 from mocap_gapfill.core.normalize import find_reference, frames_of, normalize
@@ -325,7 +325,7 @@ def test_auto_refills_its_copies_with_what_rigid_partners_carry_seen(data_dir, m
                       np.random.default_rng([0, *label.encode()]), take.names)
     query = with_gaps(take, miss)
     seen = fill_module._carried_closely(miss, fill_module.baselines.rigid_estimates(
-        query.positions, weighted=True)[1], fill_module.AUTO_RIGID_FIRST, take.fps)
+        query.positions, weighted=True)[1], AutoConfig.rigid_first, take.fps, AutoConfig())
     assert seen.any() and not (seen & ~miss).any()
     scores = {"knn": rmse_mm(fill(query, "knn", kb=kb), take, miss),
               "auto": rmse_mm(fill(query, "auto", kb=kb), take, miss)}
@@ -337,14 +337,13 @@ def test_auto_refills_its_copies_with_what_rigid_partners_carry_seen(data_dir, m
     assert scores["auto"] < 1.1 * scores["knn"]
 
 
-def test_auto_judges_a_markers_one_gap_on_more_than_one_copy(data_dir, monkeypatch):
+def test_auto_judges_a_markers_one_gap_on_more_than_one_copy(data_dir):
     """A marker with one gap had one copy of it to judge the methods on: 01_01's real gap
     (RBAC, the take's last 0.25 s) on 135_02 at 60 fps, where the knowledge base and the rigid
     partners refilled the copy alike (19 and 20 mm with the full KB), so ``auto`` blended them
     half and half and made 24 mm of a gap the partners alone fill to 4.5 mm. A point whose
-    copies hold fewer than fill.AUTO_PROBE_FRAMES frames has its gaps copied again, further
+    copies hold fewer than ``AutoConfig.probe_frames`` frames has its gaps copied again, further
     off. When written: 4.5 mm, 24.3 with one copy (rigid 4.5, knn 44.8)."""
-    from mocap_gapfill.core import fill as fill_module
 
     c3d = data_dir / "cmu/c3d"
     kb = build_kb([c3d / "01_01.c3d", c3d / "85_02.c3d"], fps=60.0)
@@ -354,12 +353,11 @@ def test_auto_judges_a_markers_one_gap_on_more_than_one_copy(data_dir, monkeypat
                             filled=None)
     miss = real_gaps(source, take.names, take.n_frames)
     assert [(take.names[p], b + 1 - a) for p, a, b in gap_runs(miss)] == [("RBAC", 15)]
-    assert validation_gaps(miss, fill_module.AUTO_PROBES,
-                           enough=fill_module.AUTO_PROBE_FRAMES).sum() == 30
+    assert validation_gaps(miss, AutoConfig.probes, enough=AutoConfig.probe_frames).sum() == 30
     query = with_gaps(take, miss)
     scores = {m: rmse_mm(fill(query, m, kb=kb), take, miss) for m in ("auto", "rigid")}
-    monkeypatch.setattr(fill_module, "AUTO_PROBE_FRAMES", 0)
-    scores["auto, one copy"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
+    scores["auto, one copy"] = rmse_mm(fill(query, "auto", kb=kb,
+                                            config=AutoConfig(probe_frames=0)), take, miss)
     print(scores)
     assert scores["auto"] < 1.1 * scores["rigid"] < 0.5 * scores["auto, one copy"]
 
@@ -405,8 +403,7 @@ def test_auto_leans_on_the_knowledge_base_where_a_markers_partners_stray(data_di
     assert per_frame < 0.97 * per_point
 
 
-def test_auto_weighs_short_dropouts_of_a_skeleton_on_enough_copied_frames(daz_kb, data_dir,
-                                                                          monkeypatch):
+def test_auto_weighs_short_dropouts_of_a_skeleton_on_enough_copied_frames(daz_kb, data_dir):
     """Five copies of a joint's 3-frame dropouts are 15 samples, and they were the copies of its
     first five gaps, all near the start of the take: on CMU 01_08 (a subject outside the KB,
     3-frame dropouts as `evaluate --protocol shortgaps` punches them) they showed the KB
@@ -415,7 +412,6 @@ def test_auto_weighs_short_dropouts_of_a_skeleton_on_enough_copied_frames(daz_kb
     such a joint go on until they hold 30 frames. When written, with this smaller KB: 3.55 mm,
     5.09 with five copies (rigid 2.70, spline 16.4, knn 20.1); since the partner's pattern joins
     short gaps (session 36): 2.83 and 3.47."""
-    from mocap_gapfill.core import fill as fill_module
 
     take = complete_take(read_motion(data_dir / DAZ / "01/01_08.bvh.gz", skip_frames=6),
                          daz_kb.names, 60.0)
@@ -423,25 +419,23 @@ def test_auto_weighs_short_dropouts_of_a_skeleton_on_enough_copied_frames(daz_kb
     miss = punch_gaps(take.n_frames, take.n_points, "shortgaps", 3,
                       np.random.default_rng([0, *label.encode()]), take.names)
     gapped = miss.any(axis=0)
-    probe = validation_gaps(miss, fill_module.AUTO_PROBES, least=fill_module.AUTO_PROBE_FRAMES)
+    probe = validation_gaps(miss, AutoConfig.probes, least=AutoConfig.probe_frames)
     assert not (probe & miss).any() and (probe[:, gapped].sum(axis=0) >= 30).all()
-    assert (validation_gaps(miss, fill_module.AUTO_PROBES)[:, gapped].sum(axis=0) < 30).all()
+    assert (validation_gaps(miss, AutoConfig.probes)[:, gapped].sum(axis=0) < 30).all()
     query = with_gaps(take, miss)
     scores = {"auto": rmse_mm(fill(query, "auto", kb=daz_kb), take, miss)}
-    monkeypatch.setattr(fill_module, "AUTO_PROBE_FRAMES", 0)
-    scores["auto, five copies"] = rmse_mm(fill(query, "auto", kb=daz_kb), take, miss)
+    scores["auto, five copies"] = rmse_mm(fill(query, "auto", kb=daz_kb,
+                                               config=AutoConfig(probe_frames=0)), take, miss)
     print(scores)
     assert scores["auto"] < 0.9 * scores["auto, five copies"]
 
 
-def test_auto_lets_a_partners_pattern_join_the_spline_in_short_dropouts(daz_kb, data_dir,
-                                                                      monkeypatch):
+def test_auto_lets_a_partners_pattern_join_the_spline_in_short_dropouts(daz_kb, data_dir):
     """In a dropout of a few frames a joint can turn where a spline through the take cuts the
     corner; the pattern fill (its steadiest partner's trajectory, offset to the gap's ends)
     follows the turn. It joins the spline and the other estimates by its error on the same
     copies. CMU 01_08 (a subject outside the KB), 3-frame dropouts as `evaluate --protocol
     shortgaps` punches them: when written 2.83 mm with it, 3.55 without."""
-    from mocap_gapfill.core import fill as fill_module
 
     take = complete_take(read_motion(data_dir / DAZ / "01/01_08.bvh.gz", skip_frames=6),
                          daz_kb.names, 60.0)
@@ -453,8 +447,8 @@ def test_auto_lets_a_partners_pattern_join_the_spline_in_short_dropouts(daz_kb, 
     assert sum(a.pattern > 0.2 for a in accounts) > len(accounts) / 10  # 131 of 883 when written
     assert all(abs(a.rigid + a.models + a.windows + a.own + a.spline + a.pattern - 1) < 1e-9
                for a in accounts)
-    monkeypatch.setattr(fill_module, "AUTO_PATTERN_WEIGHT", 0.0)
-    without = rmse_mm(fill(query, "auto", kb=daz_kb), take, miss)
+    without = rmse_mm(fill(query, "auto", kb=daz_kb, config=AutoConfig(pattern_weight=0.0)),
+                      take, miss)
     print(rmse_mm(filled, take, miss), without)
     assert rmse_mm(filled, take, miss) < 0.9 * without
 
@@ -479,15 +473,13 @@ def test_auto_regresses_long_gaps_on_what_the_knowledge_base_sees(daz_kb, data_d
     assert scores["auto"] < 1.8 * scores["rigid"] and scores["auto"] < 0.25 * scores["knn"]
 
 
-def test_auto_short_copies_do_not_vouch_for_rigid_partners_past_their_spread(daz_kb, data_dir,
-                                                                              monkeypatch):
+def test_auto_short_copies_do_not_vouch_for_rigid_partners_past_their_spread(daz_kb, data_dir):
     """03_02 (a subject outside the KB, 180 frames at 60 fps) with its right leg gone for half
     the take (the `bodyparts` protocol): the copies of so long a gap are a half or a quarter of
     it, and the rigid estimate, carried from the gap's ends by partners on the pelvis and the
     other leg, looks far better on them than it is in the gap. Its error is held at least at its
     donors' spread: 225.2 -> 139.5 mm when written (rigid 249.8, knn 92.0); with the windows of
     motion that join the knowledge base's models on long gaps (session 18) 132.0 -> 72.7 mm."""
-    from mocap_gapfill.core import fill as fills
 
     take = read_motion(data_dir / DAZ / "03/03_02.bvh.gz", skip_frames=6)
     take = take.replace(positions=resample(take.positions, take.fps, 60.0), fps=60.0)
@@ -495,8 +487,8 @@ def test_auto_short_copies_do_not_vouch_for_rigid_partners_past_their_spread(daz
                       np.random.default_rng(0), take.names)
     query = with_gaps(take, miss)
     floor = rmse_mm(fill(query, "auto", kb=daz_kb), take, miss)
-    monkeypatch.setattr(fills, "AUTO_SPREAD_CAP", 0.0)
-    trusting = rmse_mm(fill(query, "auto", kb=daz_kb), take, miss)
+    trusting = rmse_mm(fill(query, "auto", kb=daz_kb, config=AutoConfig(spread_cap=0.0)),
+                       take, miss)
     print(floor, trusting)
     assert floor < 0.75 * trusting
     assert floor < 0.75 * rmse_mm(fill(query, "rigid"), take, miss)
@@ -510,7 +502,6 @@ def test_auto_windows_of_motion_carry_a_limb_gone_for_seconds(daz_kb, walk, monk
     of a second or more where they refill the copies better: 174.3 -> 84.7 mm (92.6 since the
     take's own regression joins them, session 22). Matched in
     chunks of 2 s instead of 4, the joins cross-fade: no jump, about the same error."""
-    from mocap_gapfill.core import fill as fills
     from mocap_gapfill.core import matching
     from mocap_gapfill.core.matching import fill_match
 
@@ -524,8 +515,8 @@ def test_auto_windows_of_motion_carry_a_limb_gone_for_seconds(daz_kb, walk, monk
     scores = {"match": rmse_mm(matched, walk, miss),
               "knn": rmse_mm(fill(query, "knn", kb=kb), walk, miss),
               "auto": rmse_mm(fill(query, "auto", kb=kb), walk, miss)}
-    monkeypatch.setattr(fills, "AUTO_MATCH_SECONDS", np.inf)
-    scores["auto without windows"] = rmse_mm(fill(query, "auto", kb=kb), walk, miss)
+    scores["auto without windows"] = rmse_mm(fill(query, "auto", kb=kb, config=AutoConfig(
+        match_seconds=np.inf)), walk, miss)
     monkeypatch.setattr(matching, "POSE_CHUNK", 2.0)
     chunked = fill_match(query, kb)
     scores["match in 2 s chunks"] = rmse_mm(chunked, walk, miss)
@@ -568,13 +559,12 @@ def test_windows_of_the_take_itself_carry_a_limb_gone_for_seconds(daz_kb, data_d
     assert scores["auto"] < 0.85 * rmse_mm(fill(query, "rigid"), take, miss)
 
 
-def test_a_partners_pattern_carries_a_leg_that_follows_the_other(daz_kb, data_dir, monkeypatch):
+def test_a_partners_pattern_carries_a_leg_that_follows_the_other(daz_kb, data_dir):
     """02_10 (subject out of the KB) with its left leg gone for the middle half (the `bodyparts`
     protocol): the leg keeps following the other one, so a partner's pattern (Vicon's pattern
     fill) refills its copies better than the knowledge base and the take's regression, by more
     than its offset to the partner wanders over the take, and joins them (session 41).
     Measured when written (mm): `auto` 55.9 -> 25.3, `pattern` 47.0."""
-    from mocap_gapfill.core import fill as fill_module
 
     take = read_motion(data_dir / DAZ / "02/02_10.bvh.gz", skip_frames=6)
     take = take.replace(positions=resample(take.positions, take.fps, 60.0), fps=60.0)
@@ -584,8 +574,8 @@ def test_a_partners_pattern_carries_a_leg_that_follows_the_other(daz_kb, data_di
     out, accounts = fill(query, "auto", kb=daz_kb, return_account=True)
     scores = {"auto": rmse_mm(out, take, miss),
               "pattern": rmse_mm(fill(query, "pattern"), take, miss)}
-    monkeypatch.setattr(fill_module, "AUTO_PATTERN_FLOOR", 1e12)  # never trusted: left out
-    scores["auto without it"] = rmse_mm(fill(query, "auto", kb=daz_kb), take, miss)
+    scores["auto without it"] = rmse_mm(fill(  # never trusted: left out
+        query, "auto", kb=daz_kb, config=AutoConfig(pattern_floor=1e12)), take, miss)
     print(scores, [(a.point, round(a.pattern, 2)) for a in accounts])
     assert scores["auto"] < 0.8 * scores["auto without it"]
     assert scores["auto"] < scores["pattern"]
@@ -779,7 +769,6 @@ def test_auto_weighs_its_methods_with_a_cheaper_fill_of_the_copies(data_dir, mon
     (20 % of its markers gone per half second, subject out of the KB) stays within 5 %. Measured
     when written: 30.5 mm (full settings 29.6), 134 local models fitted for the copies (228); on
     the tuning takes the scout changed auto's RMSE by +0.1 % (joints) and +0.25 % (markers)."""
-    from mocap_gapfill.core import fill as fill_module
     from mocap_gapfill.core import recover
 
     c3d = data_dir / "cmu/c3d"
@@ -805,14 +794,12 @@ def test_auto_weighs_its_methods_with_a_cheaper_fill_of_the_copies(data_dir, mon
     monkeypatch.setattr(recover, "fill_knn", watched)
     scores, models = {}, {}
     for label, fps, iterations in (("scout", 15.0, 10), ("full", 30.0, 20)):
-        monkeypatch.setattr(fill_module, "AUTO_COPIES_MODEL_FPS", fps)
-        monkeypatch.setattr(fill_module, "AUTO_COPIES_ITERATIONS", iterations)
         # the full settings choose the factor like the fill of the gaps
-        monkeypatch.setattr(fill_module, "AUTO_COPIES_QUERY_NOISE",
-                            0.25 if label == "scout" else "auto")
+        config = AutoConfig(copies_model_fps=fps, copies_iterations=iterations,
+                            copies_query_noise=0.25 if label == "scout" else "auto")
         seen.clear()
         fitted.clear()
-        scores[label] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
+        scores[label] = rmse_mm(fill(query, "auto", kb=kb, config=config), take, miss)
         copies, gaps = seen[0], seen[-1]  # the copies' fill comes first
         assert (copies.model_fps, copies.max_iterations) == (fps, iterations)
         assert copies.query_noise == (0.25 if label == "scout" else "auto")
@@ -835,7 +822,7 @@ def _short_marker_gaps(data_dir, name, protocol):
         yield length, take, kb, with_gaps(take, miss), miss
 
 
-def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir, monkeypatch):
+def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir):
     """85_02 (subject out of the KB) with 5 % of its samples gone in dropouts of 3 and of 12
     frames at 120 fps (the `shortgaps` protocol): over 25-100 ms a marker moves along a smooth
     curve that a spline through the take follows closer than anything carried from other
@@ -845,14 +832,12 @@ def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir, monkeyp
     0.19 / 9.03, rigid 1.06 / 8.30, pattern 1.64 / 10.98 (scoring the rigid estimate on the
     marker's own copies instead: auto 0.74 / 7.12). Since the place among the partners joins
     the rigid estimate (session 46): auto 0.21 / 3.48, without the spline 0.75 / 4.94."""
-    from mocap_gapfill.core import fill as fill_module
 
     for length, take, kb, query, miss in _short_marker_gaps(data_dir, "85_02", "shortgaps"):
         scores = {m: rmse_mm(fill(query, m, kb=kb), take, miss)
                   for m in ("auto", "spline", "rigid", "pattern")}
-        with monkeypatch.context() as patch:
-            patch.setattr(fill_module, "AUTO_SPLINE_COPIES", 0)
-            scores["alone"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
+        scores["alone"] = rmse_mm(fill(query, "auto", kb=kb, config=AutoConfig(spline_copies=0)),
+                                  take, miss)
         print(length, scores)
         assert scores["auto"] < (0.3 if length == 3 else 0.8) * scores["alone"]
         assert scores["auto"] < min(scores["rigid"], scores["pattern"])
@@ -881,21 +866,19 @@ def test_auto_lets_a_partners_pattern_carry_short_gaps_at_the_takes_ends(data_di
                    for a in accounts)
 
 
-def test_auto_carries_a_marker_on_from_its_one_key_at_the_takes_ends(data_dir, monkeypatch):
+def test_auto_carries_a_marker_on_from_its_one_key_at_the_takes_ends(data_dir):
     """06_01 (subject out of the KB) with 15 % of its markers gone for the first 3 frames and as
     many others for the last (the `endgaps` protocol): over a few frames a marker carries on as
     it moved into its one key, by a rule the take's own windows show (the steps behind the key,
     weighted per frame from it), and auto weighs that beside the partner's pattern and its fill
     by their errors on one-sided copies. Measured when written (mm): auto 1.48, without it 1.73;
     every gap takes a share of it."""
-    from mocap_gapfill.core import fill as fill_module
 
     length, take, kb, query, miss = next(_short_marker_gaps(data_dir, "06_01", "endgaps"))
     filled, accounts = fill(query, "auto", kb=kb, return_account=True)
     scores = {"auto": rmse_mm(filled, take, miss)}
-    with monkeypatch.context() as patch:
-        patch.setattr(fill_module, "AUTO_LEARNED_ENDS_WEIGHT", 0.0)
-        scores["without"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
+    scores["without"] = rmse_mm(fill(query, "auto", kb=kb,
+                                     config=AutoConfig(learned_ends_weight=0.0)), take, miss)
     print(length, scores)
     assert scores["auto"] < 0.93 * scores["without"]
     assert all(a.spline > 0 for a in accounts)
@@ -943,13 +926,18 @@ def _cmu_first_frames(data_dir, name, kb_takes):
 def _auto_against(take, kb, protocol, setting, patch, target, name, value):
     """RMSE (mm) over the gaps ``protocol`` punches at ``setting`` (drawn from its label, as
     :func:`evaluate` does) of ``auto``, of the spline, and of ``auto`` with ``target.name`` set
-    to ``value`` (``patch``: a monkeypatch)."""
+    to ``value`` (``target``: :class:`AutoConfig` for one of auto's settings, else a module
+    whose function ``patch``, a monkeypatch, replaces)."""
     label = f"{'rate' if protocol == 'markers' else 'l'}={setting}"
     miss = punch_gaps(take.n_frames, take.n_points, protocol, setting,
                       np.random.default_rng([0, *label.encode()]))
     query = with_gaps(take, miss)
     out = {"auto": rmse_mm(fill(query, "auto", kb=kb), take, miss),
            "spline": rmse_mm(fill(query, "spline"), take, miss)}
+    if target is AutoConfig:
+        out["patched"] = rmse_mm(fill(query, "auto", kb=kb, config=AutoConfig(**{name: value})),
+                                 take, miss)
+        return out
     with patch.context() as patched:
         patched.setattr(target, name, value)
         out["patched"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
@@ -986,20 +974,19 @@ def test_auto_leans_on_the_takes_own_interpolator_where_nearly_all_of_the_body_i
     """135_02's first 1,800 complete frames (subject out of the KB) with bursts of 30 frames at
     120 fps, 50-100 % of the markers gone at once: where more than 90 % of them are gone over a
     gap, the few partners left stray further than their copies foretold, and the fill goes half
-    of the way on to the take's own interpolator (``fill.AUTO_ALL_GONE_SHARE``; session 66).
+    of the way on to the take's own interpolator (``AutoConfig.all_gone_share``; session 66).
     Its gap accounts say so (the smooth track's share). Where few points are gone (the `markers`
     protocol at 10 %) nothing changes. Measured when written (mm; 01_01's bursts of 60 frames,
     37.5 against 42.5); since session 67 leaves the models out of such gaps, 135_02's bursts of
     30: auto 30.6, without it 31.8, spline 35.8 (01_01's of 60: 32.8 against 33.1)."""
-    from mocap_gapfill.core import fill as fill_module
 
     bursts, miss, accounts, few = _a_burst_rule(data_dir, monkeypatch, "135_02",
                                                 ("02_05", "01_01"), 30,
-                                                (fill_module, "AUTO_ALL_GONE_SHARE", 0.0))
+                                                (AutoConfig, "all_gone_share", 0.0))
     assert bursts["auto"] < 0.98 * bursts["patched"]
-    gone = [g for g in accounts if miss[g.first:g.last + 1].mean() > fill_module.AUTO_ALL_GONE
+    gone = [g for g in accounts if miss[g.first:g.last + 1].mean() > AutoConfig.all_gone
             and g.first > 0 and g.last < len(miss) - 1]
-    assert gone and all(g.spline >= fill_module.AUTO_ALL_GONE_SHARE for g in gone)
+    assert gone and all(g.spline >= AutoConfig.all_gone_share for g in gone)
     assert few["auto"] == few["patched"]
 
 
@@ -1014,11 +1001,12 @@ def test_auto_leaves_the_models_out_of_a_gap_where_most_of_the_body_is_gone(data
     auto 32.8, with the models 37.4, spline 58.9."""
     from mocap_gapfill.core import fill as fill_module
 
-    kept = (fill_module, "_models_left_out_where_gone", lambda missing, shares, knn: (shares, knn))
+    kept = (fill_module, "_models_left_out_where_gone",
+            lambda missing, shares, knn, cfg: (shares, knn))
     bursts, miss, accounts, few = _a_burst_rule(data_dir, monkeypatch, "01_01",
                                                 ("02_05", "135_02"), 60, kept)
     assert bursts["auto"] < 0.95 * bursts["patched"]
-    gone = [g for g in accounts if miss[g.first:g.last + 1].mean() > fill_module.AUTO_BODY_GONE]
+    gone = [g for g in accounts if miss[g.first:g.last + 1].mean() > AutoConfig.body_gone]
     assert gone and all(g.models == g.windows == g.own == 0 for g in gone)
     assert few["auto"] == few["patched"]
 
@@ -1070,11 +1058,9 @@ def test_auto_weighs_the_takes_own_interpolator_beside_the_spline(data_dir, monk
     refills the bursts better than the spline. On a marker set auto's smooth track goes half
     of the way on to it. Measured when written (mm): the learned rule 4.92 against the
     spline's 6.12; auto 4.23, without the learned rule 4.71."""
-    from mocap_gapfill.core import fill as fill_module
 
     take, kb = _cmu_first_frames(data_dir, "02_05", ("01_01", "135_02"))
-    bursts = _auto_against(take, kb, "bursts", 30, monkeypatch, fill_module, "AUTO_LEARNED",
-                           0.0)
+    bursts = _auto_against(take, kb, "bursts", 30, monkeypatch, AutoConfig, "learned", 0.0)
     miss = punch_gaps(take.n_frames, take.n_points, "bursts", 30,
                       np.random.default_rng([0, *b"l=30"]))
     bursts["learned"] = rmse_mm(take.replace(positions=baselines.fill_learned(
@@ -1092,11 +1078,9 @@ def test_auto_doubts_a_short_gaps_fill_where_most_of_the_body_is_gone(data_dir, 
     expected error is taken 4 times over (squared). Measured when written (mm): auto 0.60,
     the copies taken at their word 0.67, spline 0.51, pattern 2.35; since session 67 (the
     models left out where most of the body is gone) 0.48 against 0.50."""
-    from mocap_gapfill.core import fill as fill_module
 
     take, kb = _cmu_first_frames(data_dir, "135_02", ("02_05", "01_01"))
-    bursts = _auto_against(take, kb, "bursts", 3, monkeypatch, fill_module, "AUTO_GONE_DOUBT",
-                           1.0)
+    bursts = _auto_against(take, kb, "bursts", 3, monkeypatch, AutoConfig, "gone_doubt", 1.0)
     print(bursts)
     assert bursts["auto"] < 0.97 * bursts["patched"]  # the copies taken at their word
     assert bursts["auto"] < 1.25 * bursts["spline"]
@@ -1145,14 +1129,13 @@ def test_auto_without_a_knowledge_base_fills_dropped_frames(data_dir):
     assert any("holes no other estimate reached" in m for m in messages)
 
 
-def test_auto_carries_on_smoothly_from_a_gaps_ends(data_dir, monkeypatch):
+def test_auto_carries_on_smoothly_from_a_gaps_ends(data_dir):
     """85_02 (subject out of the KB) with 20 % of its markers gone per half second: next to a
     gap's end a marker carries on along a smooth curve, and auto leans towards a spline through
     the take there, by weights per distance from the end fitted on the copies. Measured when
     written (mm, the frame next to each end / the whole gaps): auto 7.7 / 29.6, without the
     lean 17.3 / 30.3 (a jump at the gap's ends), the spline alone 1.7 / 213.1. Gaps at the take's
     ends have no spline across them and keep their fill."""
-    from mocap_gapfill.core import fill as fill_module
     from mocap_gapfill.core.motion import gap_runs
 
     c3d = data_dir / "cmu/c3d"
@@ -1167,9 +1150,8 @@ def test_auto_carries_on_smoothly_from_a_gaps_ends(data_dir, monkeypatch):
         else:
             edge[[a, b], p] = True
     fills = {"auto": fill(query, "auto", kb=kb), "spline": fill(query, "spline")}
-    with monkeypatch.context() as patch:
-        patch.setattr(fill_module, "AUTO_ENDS_LEAST", 1.01)  # no weight reaches it: no lean
-        fills["alone"] = fill(query, "auto", kb=kb)
+    # no weight reaches it: no lean
+    fills["alone"] = fill(query, "auto", kb=kb, config=AutoConfig(ends_least=1.01))
     scores = {m: (rmse_mm(f, take, edge), rmse_mm(f, take, miss)) for m, f in fills.items()}
     print(scores)
     assert scores["auto"][0] < 0.6 * scores["alone"][0]
@@ -1188,7 +1170,6 @@ def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
     import time
 
     from mocap_gapfill.core import baselines, recover
-    from mocap_gapfill.core.fill import AUTO_PROBES
 
     c3d = data_dir / "cmu/c3d"
     take = read_motion(c3d / "85_02.c3d")
@@ -1221,7 +1202,7 @@ def test_ctrl_c_in_auto_stops_the_rigid_estimates_beside_it(data_dir):
             fill(with_gaps(take, miss), "auto", kb=build_kb([c3d / "01_01.c3d"]))
     assert threading.active_count() == before
     assert beside[0] == gaps_done  # the gaps' estimates came before the first fill
-    calls = 2 * (miss | validation_gaps(miss, AUTO_PROBES)).any(axis=0).sum()  # the copies'
+    calls = 2 * (miss | validation_gaps(miss, AutoConfig.probes)).any(axis=0).sum()  # the copies'
     assert len(points_done) - beside[0] < calls / 10  # they stopped well short of every point
     with pytest.raises(KeyboardInterrupt):
         baselines.rigid_estimates(with_gaps(take, miss).positions, should_cancel=lambda: True)
@@ -1384,20 +1365,18 @@ def test_auto_without_a_knowledge_base_regresses_a_joint_gone_for_seconds_on_the
                for m in messages)
 
 
-def test_auto_without_a_knowledge_base_regresses_a_joint_gone_for_half_a_second(
-        walk, monkeypatch):
+def test_auto_without_a_knowledge_base_regresses_a_joint_gone_for_half_a_second(walk):
     """Without a knowledge base the take's own regression joins from half a second
     (``AUTO_ALONE_SECONDS``; with one, from a second). Daz 07_05, a tuning take, six joints
     gone for 0.5 s at a time: when written 15.0 mm, from a second on 42.3, `rigid` 42.6 (non-test
     takes at l = 30 frames, new / from a second on: 0.79; docs/METHOD_NOTES.md, session 74)."""
-    from mocap_gapfill.core import fill as fills
 
     take = complete_take(walk, None)
     alone, rigid, messages, query = _alone_and_rigid(take, "joints", (6, 30), b"m=6,l=30")
     assert alone < 0.5 * rigid
     assert any("with gaps of 0.5 s or more" in m for m in messages)
-    monkeypatch.setattr(fills, "AUTO_ALONE_SECONDS", fills.AUTO_MATCH_SECONDS)
-    from_a_second = rmse_mm(fill(query, "auto"), take, query.missing)
+    from_a_second = rmse_mm(fill(query, "auto", config=AutoConfig(
+        alone_seconds=AutoConfig.match_seconds)), take, query.missing)
     print(from_a_second)
     assert alone < 0.5 * from_a_second
 

@@ -12,7 +12,7 @@
    the ends only, within 5 mm), in the same process.
 4. Smooth track: ``auto`` on the same frames with bursts of 30 frames (50-100 % of the markers
    gone at once, once per 120 frames) and with dropouts of 6 frames (5 % of the samples), its
-   smooth track the spline alone (``AUTO_LEARNED`` = 0, before session 65) and half of the way
+   smooth track the spline alone (``AutoConfig.learned`` = 0) and half of the way
    on to the take's own interpolator (the default), in the same process.
 
 Usage: OMP_NUM_THREADS=2 .venv/bin/python tools/bench_engine.py [--repeat 3] [--json OUT]
@@ -110,14 +110,14 @@ def _marker_case():
     return kb, take, {"frames": 2048, "points": take.n_points, "kb_size": kb.size}
 
 
-def _timed_auto(result, label, take, miss, kb):
-    """``auto`` on ``take`` with ``miss`` gone: its seconds appended to ``result[label_s]``, its
-    RMSE over the gaps in ``result[label_rmse_missing_mm]``."""
+def _timed_auto(result, label, take, miss, kb, config=None):
+    """``auto`` on ``take`` with ``miss`` gone (``config``: its AutoConfig): its seconds appended
+    to ``result[label_s]``, its RMSE over the gaps in ``result[label_rmse_missing_mm]``."""
     from mocap_gapfill.core.evaluate import rmse_mm, with_gaps
     from mocap_gapfill.core.fill import fill
 
     t = time.perf_counter()
-    out = fill(with_gaps(take, miss), "auto", kb=kb)
+    out = fill(with_gaps(take, miss), "auto", kb=kb, config=config)
     result.setdefault(f"{label}_s", []).append(time.perf_counter() - t)
     result[f"{label}_rmse_missing_mm"] = rmse_mm(out, take, miss)
 
@@ -136,11 +136,10 @@ def stage_markers(repeat):
 
     kb, take, result = _marker_case()
     miss = punch_gaps(2048, take.n_points, "markers", 0.3, np.random.default_rng(0))
-    now = fills.AUTO_REACH, fills.AUTO_RIGID_FIRST_MARKERS
-    then = None, fills.AUTO_RIGID_FIRST  # session 7: from the gap ends, partners alone within 5 mm
-    for label, (reach, alone) in (("ends", then), ("reach", now)) * repeat:
-        fills.AUTO_REACH, fills.AUTO_RIGID_FIRST_MARKERS = reach, alone
-        _timed_auto(result, label, take, miss, kb)
+    # from the gap ends, partners alone within 5 mm; and the default
+    then = fills.AutoConfig(reach=None, rigid_first_markers=fills.AutoConfig.rigid_first)
+    for label, config in (("ends", then), ("reach", fills.AutoConfig())) * repeat:
+        _timed_auto(result, label, take, miss, kb, config)
     _medians(result, ("ends", "reach"))
     return result
 
@@ -152,14 +151,12 @@ def stage_smooth(repeat):
     from mocap_gapfill.core.evaluate import punch_gaps
 
     kb, take, result = _marker_case()
-    learned = fills.AUTO_LEARNED
     for protocol, length in (("bursts", 30), ("shortgaps", 6)):
         miss = punch_gaps(2048, take.n_points, protocol, length, np.random.default_rng(0))
-        for label, share in (("spline", 0.0), ("learned", learned)) * repeat:
-            fills.AUTO_LEARNED = share
-            _timed_auto(result, f"{protocol}_{label}", take, miss, kb)
+        for label, config in (("spline", fills.AutoConfig(learned=0.0)),
+                              ("learned", fills.AutoConfig())) * repeat:
+            _timed_auto(result, f"{protocol}_{label}", take, miss, kb, config)
         _medians(result, (f"{protocol}_spline", f"{protocol}_learned"))
-    fills.AUTO_LEARNED = learned
     return result
 
 

@@ -33,8 +33,7 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from mocap_gapfill.core.bonefill import (AUTO_COPIES, BONE_METHODS, COPY_MARGIN, fill_bones,
-                                         gap_copies)
+from mocap_gapfill.core.bonefill import BONE_METHODS, BoneConfig, fill_bones, gap_copies
 from mocap_gapfill.core.evaluate import (BONE_SETTINGS, kb_without, punch_bone_gaps,
                                          subject_of)
 from mocap_gapfill.core.io import read_rig_take
@@ -94,7 +93,7 @@ def run(out):
                     job.candidates(seen, location, gaps, (name,), shown_basis)[name])
                     for name in os.environ.get("FILLS", "").split(",") if name}
                 filled = rig.joints(filled)
-                copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
+                copies = gap_copies(gaps, BoneConfig.auto_copies, BoneConfig.copy_margin)
                 probe = np.zeros_like(gaps)
                 for _, b, start, length in copies:
                     probe[start:start + length, b] = True

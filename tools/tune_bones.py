@@ -26,8 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocap_gapfill.core.bonefill import AUTO_COPIES, CANDIDATES, COPY_MARGIN, _Job, gap_copies, \
-    halfway
+from mocap_gapfill.core.bonefill import CANDIDATES, BoneConfig, _Job, gap_copies, halfway
 from mocap_gapfill.core.evaluate import (BONE_SETTINGS, kb_without, punch_bone_gaps,
                                          subject_of)
 from mocap_gapfill.core.io import read_rig_take
@@ -88,7 +87,7 @@ def main(out, names=CANDIDATES):
             gaps = punch_bone_gaps(rig, len(channels), (n, l))
             seen = interpolate_channels(channels, gaps)
             job = quiet_job(rig, fps, kb)
-            copies = gap_copies(gaps, AUTO_COPIES, COPY_MARGIN)
+            copies = gap_copies(gaps, BoneConfig.auto_copies, BoneConfig.copy_margin)
             probe = np.zeros_like(gaps)
             for _, b, start, length in copies:
                 probe[start:start + length, b] = True

@@ -2,7 +2,7 @@
 session 47): the bones protocol's take-settings at l >= 60 frames (seed 0) where no copy of any
 gap fits the take (``gap_copies`` empty), on every Daz take that is not a test take, or with
 ``AMC=1`` on the ASF/AMC tuning takes; each subject out of a knowledge base that holds no test
-take (60 poses a second). ``auto`` filled with ``bonefill.UNJUDGED_CONSENSUS`` set to SHARE
+take (60 poses a second). ``auto`` filled with ``BoneConfig.unjudged_consensus`` set to SHARE
 (0: ``match`` unjudged, as before session 47; 1: the mean of ``match`` and ``regress_kernel``;
 2: ``regress_kernel``); per take-setting the RMSE of ``auto`` and ``interp`` per gap.
 
@@ -26,7 +26,6 @@ from tune_bones import AMC, AMC_TUNING, DAZ, TEST_TAKES, armature_kb
 
 
 def run(out, share):
-    bonefill.UNJUDGED_CONSENSUS = share
     amc = bool(os.environ.get("AMC"))
     full = armature_kb(amc)
     paths = ([AMC / f"{t}.amc" for t in AMC_TUNING] if amc else
@@ -39,13 +38,14 @@ def run(out, share):
             for n, l in BONE_SETTINGS:
                 gaps = punch_bone_gaps(rig, len(channels), (n, l))
                 if l < 60 or not gaps.any() or bonefill.gap_copies(
-                        gaps, bonefill.AUTO_COPIES, bonefill.COPY_MARGIN):
+                        gaps, bonefill.BoneConfig.auto_copies, bonefill.BoneConfig.copy_margin):
                     continue
                 seen = interpolate_channels(channels, gaps)
                 row = {"take": path.name, "setting": f"n={n},l={l}"}
                 for method in ("auto", "interp"):
                     basis = bonefill.fill_bones(rig, seen, location, gaps, fps, kb=kb,
-                                                method=method)
+                                                method=method, config=bonefill.BoneConfig(
+                                                    unjudged_consensus=share))
                     errors = bone_errors(rig, basis, truth, gaps)
                     row[method] = {"mm": errors["rmse_missing_mm"], "gaps_mm": errors["gaps_mm"]}
                 sink.write(json.dumps(row) + "\n")
