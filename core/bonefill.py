@@ -726,41 +726,18 @@ class _Job:
         return {name: basis for name, basis in out.items() if name in names}
 
     def auto(self, channels, location, gaps, seen):
-        """Per gap, the candidate (:data:`AUTO_CANDIDATES` and ``stack``, ``learn`` on gaps
-        under ``learn_seconds`` only, or
-        :data:`AUTO_POSITIONS` where the knowledge base holds no bone rotations) and the share
-        of the way to it from
-        interpolation (``auto_shares``) that refill copies of the gap - same bone, same
-        length, where the bone is keyed - best, if they do so below ``promote`` of
-        interpolation's error (short gaps: ``promote_short``, all the way only below
-        ``promote_short_whole``); interpolation otherwise, or ``stack_long`` on gaps of
-        ``long_stack`` seconds or more (and on gaps of ``few_copies`` seconds or more
-        with fewer than ``auto_copies`` copies of their own); the share of any gap shorter
-        than ``long_stack`` cut where the fills disagree on the gap (:meth:`_doubted`).
-        A gap without copies is
-        scored on the take's copies of other gaps; a take without any takes ``match`` on gaps
-        of ``long_gap`` seconds or more and ``mix`` on shorter ones (``half`` on all), but
-        ``stack_long`` in equal parts on gaps of ``long_stack`` seconds or more
-        that gaps of other bones overlap (``match`` sees less of the body there), and
-        interpolation where it and ``regress`` outvote ``match`` (:meth:`_outvoted`); where
-        all the take's copies together favour the cubic (``cubic_trust``), the part a
-        short gap kept of the interpolation goes part of the way on to ``hermite``, and
-        ``learn_pull`` of it on to ``learn`` where ``learn`` is judged and the bone's own
-        windows of the gap's length trust it (``learn_trust``); a gap from
-        ``learn_seconds`` up to ``mid_learn_seconds`` with keys beyond its keys, in a
-        take with copies, goes ``mid_learn`` of the way on from its fill to ``learn``. Last,
-        each gap of ``long_stack`` seconds or more (where ``stack_long`` is made) that
-        does not keep the interpolation goes ``consensus`` of the way on from its fill to
-        the mean of :data:`CONSENSUS_FILLS`, and in a take without copies every other gap of
-        ``long_gap`` seconds or more that does not keep it ``unjudged_consensus`` of
-        the way (``match`` is unjudged there); a gap at a clip end where the two fills of
-        :data:`CONSENSUS_FILLS`, each filling the take's gaps alone, agree
-        (:meth:`_ends_agreed`) goes ``ends_share`` of the rest of the way on to their
-        mean. Without a knowledge base the same from the take
-        alone: :data:`TAKE_ALONE_CANDIDATES`, the stacks without the knowledge base's fills,
-        the consensus :data:`TAKE_ALONE_CONSENSUS`; a take without copies takes ``hermite`` on
-        gaps shorter than ``long_gap`` and goes ``take_alone_unjudged`` of the way to
-        ``regress_kernel`` on longer ones."""
+        """Per gap, the candidate (:data:`AUTO_CANDIDATES` and ``stack``, ``learn`` on short
+        gaps; :data:`AUTO_POSITIONS` where the knowledge base holds no bone rotations;
+        :data:`TAKE_ALONE_CANDIDATES` without one) and the share of the way to it from the
+        interpolation that refill copies of the gap best (:meth:`_judged`), or the interpolation;
+        ``stack_long`` on long gaps none improves. A take without copies takes ``match`` on long
+        gaps and ``mix`` on short ones (without a knowledge base ``hermite``, and part of the way
+        to ``regress_kernel`` on long gaps), ``stack_long`` in equal parts where other bones'
+        gaps overlap, and the interpolation where it and ``regress`` outvote ``match``. Then each
+        gap's share is doubted and its kept part paired (:meth:`_made`), it goes on to the cubic,
+        ``learn`` and the consensus of :data:`CONSENSUS_FILLS` (:meth:`_onward`), a gap at a clip
+        end to the pair that agrees there (:meth:`_ends_agreed`), and a gap with two keys takes
+        the fill the others bear out (:meth:`_assembled`)."""
         cfg = self.cfg
         alone = self.kb is None
         rotations = alone or self.kb.turns is not None
@@ -782,11 +759,6 @@ class _Job:
         else:
             choice = [(names[0] if rotations and (e - a + 1) >= cfg.long_gap * self.fps
                        else names[1], 1.0) for _, a, e in runs]
-        estimates = [float("nan")] * len(runs)
-        expected = [float("nan")] * len(runs)  # the chosen fill's mean squared joint error
-        pull = 0.0  # how far the kept interpolation of short gaps goes on to the cubic
-        trusted = [False] * len(runs)  # short gaps whose kept interpolation goes on to learn
-        learns = np.zeros(len(runs), bool)  # short gaps where learn is judged
         longest = [rotations and not self.short(a, e)
                    and (stack or np.count_nonzero(gaps[a:e + 1].any(axis=0)) > 1)
                    for _, a, e in runs]
@@ -805,76 +777,133 @@ class _Job:
         fills = self.long_fills if any(longest) else self.stack_fills if stack else ()
         if any(unjudged):
             fills += tuple(f for f in self.consensus_fills if f not in fills)
+        table = long_table = None  # the stacks' weights, from the copies
         if any(longest) and not copies:  # nothing to weigh the fills by: equal parts
             long_table = np.full((len(stacking.DISTANCES), len(stacking.LENGTHS), len(fills)),
                                  1 / len(fills))
             choice = [("stack_long", 1.0) if last else c for c, last in zip(choice, longest)]
+        estimates, expected, pull, trusted, learns = self._unjudged(runs)
         if copies:
-            probe = np.zeros_like(gaps)
-            for _, b, start, length in copies:
-                probe[start:start + length, b] = True
-            hidden = interpolate_channels(channels, probe)
-            hidden_loc = np.where((probe & self.moves)[..., None],
-                                  interpolate_channels(location, probe), location)
-            # learn only where it is judged: short gaps with keys beyond their keys, and copies
-            learns = np.array([e - a + 1 < cfg.learn_seconds * self.fps and (b, a, e) in learnable
-                               for b, a, e in runs])
-            if cfg.learn_pull and learns.any():  # how often learn loses the bone's windows
-                losses = learn_losses(seen[..., :3, :3], channels, self.rig.modes, gaps,
-                                      self.rig.levers(), cfg.learn_keys, cfg.learn_ridge,
-                                      plus=0.002 / self.metre_scale())
-                trusted = [learns[i] and losses.get(run, 1.0) <= cfg.learn_trust
-                           for i, run in enumerate(runs)]
-            judged = np.zeros_like(gaps)
-            for i, b, start, length in copies:
-                judged[start:start + length, b] = learns[i]
-            tried = self.candidates(hidden, hidden_loc, gaps | probe, ("interp",) + names + fills,
-                                    seen, learn_on=(gaps | probe, judged))
-            truth = self.world(seen)
-            if stack:  # each copy stacked with weights its own gap's copies had no part in
-                table, by_gap, long_table = self._stack_tables(tried, truth, copies, fills)
-                of_copy = {(b, start): by_gap[i] for i, b, start, _ in copies}
-                tried["stack"] = self._stacked(tried, gaps | probe, self.stack_fills,
-                                               lambda b, a: of_copy.get((b, a), table))
-                names = names + ("stack",)
-            base = self._errors(tried["interp"], truth, copies)
-            samples = np.array([c[3] * np.count_nonzero(self.moved_by(c[1])) for c in copies])
-            # log error ratio to interpolation per copy (1 mm^2 per joint and frame keeps still
-            # bones at 0); per gap the mean over its copies, shrunk towards the take's mean
-            floor = np.array([1e-6 * c[3] * (self.below[c[1]].sum() + 1) for c in copies])
-            if stack:  # how far all the copies together favour the cubic
-                favour = -np.mean(np.log((self._errors(tried["hermite"], truth, copies) + floor)
-                                         / (base + floor)))
-                pull = min(cfg.cubic_pull, max(0.0, favour - cfg.cubic_trust))
-            owner = np.array([c[0] for c in copies])
-            everywhere, learnt = np.ones(len(copies), bool), learns[owner]
-            ratio = {}
-            for name in names:
-                for share in cfg.auto_shares:
-                    blend = halfway(tried["interp"], tried[name], gaps | probe, share)
-                    ratio[name, share] = np.log((self._errors(blend, truth, copies) + floor)
-                                                / (base + floor))
-            for i, (b, a, e) in enumerate(runs):
-                long = (e - a + 1) >= cfg.long_gap * self.fps
-                own = owner == i
-                score = {key: (r[own].sum() + cfg.shrink * r[among].mean())
-                         / (own.sum() + cfg.shrink)
-                         for key, r in ratio.items()  # learn: among the copies it fills
-                         for among in [learnt if key[0] == "learn" else everywhere]
-                         if among.any() and (key[0] != "learn" or learns[i])}
-                passed = {key: value for key, value in score.items() if value < np.log(
-                    cfg.promote if long else cfg.promote_short_whole if key[1] == 1
-                    else cfg.promote_short)}
-                choice[i] = (min(passed, key=passed.get) if passed else
-                             ("stack_long", 1.0) if longest[i] else ("interp", 0.0))
-                if (longest[i] and own.sum() < cfg.auto_copies
-                        and e - a + 1 >= cfg.few_copies * self.fps):
-                    choice[i] = ("stack_long", 1.0)  # too few copies of its own to judge by
-                if choice[i] in score:  # as a ratio of RMS errors, not of squared ones
-                    estimates[i] = float(np.exp(score[choice[i]] / 2))
-                    if own.any():  # that ratio of the interpolation's RMS error on them
-                        expected[i] = (estimates[i]
-                                       * np.mean(np.sqrt(base[own] / samples[own]))) ** 2
+            (names, choice, estimates, expected, pull, learns, trusted, table,
+             long_table) = self._judged(channels, location, gaps, seen, runs, copies, names,
+                                        fills, stack, longest, learnable, choice)
+        wanted, learn_mask, made, choice, corroborated = self._made(
+            channels, location, gaps, seen, runs, choice, trusted, learns, mid, expected, fills,
+            stack, longest, table, long_table, outvote=rotations and not alone and not copies)
+        both = [rotations and not alone and bool(cfg.medoid_fills) and bool(copies)
+                and not self.rig.roots[b] and stacking.keys_of(a, e, len(gaps)) == "both"
+                for b, a, e in runs]
+        paired_ends = self._alone(channels, location, gaps, seen, made, wanted, learn_mask,
+                                  ((self.consensus_fills if any(ends) else ())
+                                   + (cfg.medoid_fills if any(both) else ())))
+        agreed = self._ends_agreed(paired_ends, runs, ends)
+        wanted = learn_mask
+        agree = cfg.consensus if wanted.any() and set(self.consensus_fills) <= set(made) else 0.0
+        self._onward(runs, choice, estimates, corroborated, pull, trusted, longest, unjudged, mid,
+                     agreed, agree)
+        self._say(runs, choice, corroborated, pull, agreed)
+        if not wanted.any() and not agreed.any() and not any(both):
+            return seen
+        return self._assembled(seen, runs, choice, corroborated, made, paired_ends, agreed,
+                               both)
+
+    def _unjudged(self, runs):
+        """Per gap: no estimate of the error (as a share of the interpolation's, and the chosen
+        fill's mean squared joint error), no pull to the cubic, no trust in ``learn``, ``learn``
+        not judged: the start of every gap, and all there is in a take without copies."""
+        nan = [float("nan")] * len(runs)
+        return list(nan), list(nan), 0.0, [False] * len(runs), np.zeros(len(runs), bool)
+
+    def _judged(self, channels, location, gaps, seen, runs, copies, names, fills, stack,
+                longest, learnable, choice):
+        """``auto``'s choice per gap from its copies: each candidate (and its blends with the
+        interpolation at ``auto_shares``) refills the copies; per gap the mean log ratio of its
+        error to the interpolation's over its own copies, shrunk towards the take's mean
+        (``shrink``), picks the best under the bar (``promote``, ``promote_short``,
+        ``promote_short_whole``). Returns ``(names, choice, estimates, expected, pull, learns,
+        trusted, table, long_table)``: the candidates (``stack`` added where stacked), the
+        choice, the estimated error as a share of the interpolation's and the expected mean
+        squared joint error, how far the kept interpolation goes to the cubic, where ``learn``
+        is judged and trusted, and the stacks' weights."""
+        cfg = self.cfg
+        estimates, expected, pull, trusted, learns = self._unjudged(runs)
+        table = long_table = None
+        probe = np.zeros_like(gaps)
+        for _, b, start, length in copies:
+            probe[start:start + length, b] = True
+        hidden = interpolate_channels(channels, probe)
+        hidden_loc = np.where((probe & self.moves)[..., None],
+                              interpolate_channels(location, probe), location)
+        # learn only where it is judged: short gaps with keys beyond their keys, and copies
+        learns = np.array([e - a + 1 < cfg.learn_seconds * self.fps and (b, a, e) in learnable
+                           for b, a, e in runs])
+        if cfg.learn_pull and learns.any():  # how often learn loses the bone's windows
+            losses = learn_losses(seen[..., :3, :3], channels, self.rig.modes, gaps,
+                                  self.rig.levers(), cfg.learn_keys, cfg.learn_ridge,
+                                  plus=0.002 / self.metre_scale())
+            trusted = [learns[i] and losses.get(run, 1.0) <= cfg.learn_trust
+                       for i, run in enumerate(runs)]
+        judged = np.zeros_like(gaps)
+        for i, b, start, length in copies:
+            judged[start:start + length, b] = learns[i]
+        tried = self.candidates(hidden, hidden_loc, gaps | probe, ("interp",) + names + fills,
+                                seen, learn_on=(gaps | probe, judged))
+        truth = self.world(seen)
+        if stack:  # each copy stacked with weights its own gap's copies had no part in
+            table, by_gap, long_table = self._stack_tables(tried, truth, copies, fills)
+            of_copy = {(b, start): by_gap[i] for i, b, start, _ in copies}
+            tried["stack"] = self._stacked(tried, gaps | probe, self.stack_fills,
+                                           lambda b, a: of_copy.get((b, a), table))
+            names = names + ("stack",)
+        base = self._errors(tried["interp"], truth, copies)
+        samples = np.array([c[3] * np.count_nonzero(self.moved_by(c[1])) for c in copies])
+        # log error ratio to interpolation per copy (1 mm^2 per joint and frame keeps still
+        # bones at 0); per gap the mean over its copies, shrunk towards the take's mean
+        floor = np.array([1e-6 * c[3] * (self.below[c[1]].sum() + 1) for c in copies])
+        if stack:  # how far all the copies together favour the cubic
+            favour = -np.mean(np.log((self._errors(tried["hermite"], truth, copies) + floor)
+                                     / (base + floor)))
+            pull = min(cfg.cubic_pull, max(0.0, favour - cfg.cubic_trust))
+        owner = np.array([c[0] for c in copies])
+        everywhere, learnt = np.ones(len(copies), bool), learns[owner]
+        ratio = {}
+        for name in names:
+            for share in cfg.auto_shares:
+                blend = halfway(tried["interp"], tried[name], gaps | probe, share)
+                ratio[name, share] = np.log((self._errors(blend, truth, copies) + floor)
+                                            / (base + floor))
+        for i, (b, a, e) in enumerate(runs):
+            long = (e - a + 1) >= cfg.long_gap * self.fps
+            own = owner == i
+            score = {key: (r[own].sum() + cfg.shrink * r[among].mean())
+                     / (own.sum() + cfg.shrink)
+                     for key, r in ratio.items()  # learn: among the copies it fills
+                     for among in [learnt if key[0] == "learn" else everywhere]
+                     if among.any() and (key[0] != "learn" or learns[i])}
+            passed = {key: value for key, value in score.items() if value < np.log(
+                cfg.promote if long else cfg.promote_short_whole if key[1] == 1
+                else cfg.promote_short)}
+            choice[i] = (min(passed, key=passed.get) if passed else
+                         ("stack_long", 1.0) if longest[i] else ("interp", 0.0))
+            if (longest[i] and own.sum() < cfg.auto_copies
+                    and e - a + 1 >= cfg.few_copies * self.fps):
+                choice[i] = ("stack_long", 1.0)  # too few copies of its own to judge by
+            if choice[i] in score:  # as a ratio of RMS errors, not of squared ones
+                estimates[i] = float(np.exp(score[choice[i]] / 2))
+                if own.any():  # that ratio of the interpolation's RMS error on them
+                    expected[i] = (estimates[i]
+                                   * np.mean(np.sqrt(base[own] / samples[own]))) ** 2
+        return names, choice, estimates, expected, pull, learns, trusted, table, long_table
+
+    def _made(self, channels, location, gaps, seen, runs, choice, trusted, learns, mid, expected,
+              fills, stack, longest, table, long_table, outvote):
+        """The fills the chosen ones need, made for the gaps that take one (``wanted``; with
+        ``learn`` also where it is trusted or goes part of the way, ``learn_mask``); the stacks
+        from their weights; each choice doubted where the fills disagree and paired where two
+        agree (:meth:`_doubted`, :meth:`_corroborated`), and in a take without copies
+        ``outvote``d (:meth:`_outvoted`). Returns ``(wanted, learn_mask, made, choice,
+        corroborated)``."""
+        cfg = self.cfg
         wanted = np.zeros_like(gaps)
         for (b, a, e), (name, _), trust in zip(runs, choice, trusted):  # a short gap may take a
             # pair's mean and learn
@@ -898,29 +927,31 @@ class _Job:
             if any(longest):
                 made["stack_long"] = self._stacked(made, wanted, self.long_fills,
                                                    lambda b, a: long_table)
-            if rotations and not alone and not copies:
+            if outvote:
                 choice = self._outvoted(channels, location, wanted, seen, made, runs, choice)
         elif any(mid):
             made = self.candidates(channels, location, learn_mask, with_learn, seen,
                                    learn_on=(gaps, learn_mask))
-        # the fills as each fills the take's gaps alone: the pair at clip ends (neither is
-        # judged there) and the medoid's voters on the gaps with two keys
-        # (in a take with copies: where none fit, session 31's outvoting holds)
-        both = [rotations and not alone and bool(cfg.medoid_fills) and bool(copies)
-                and not self.rig.roots[b] and stacking.keys_of(a, e, len(gaps)) == "both"
-                for b, a, e in runs]
-        alone_names = ((self.consensus_fills if any(ends) else ())
-                       + (cfg.medoid_fills if any(both) else ()))
-        # (those made for every gap already, as each fills them alone, are the same)
+        return wanted, learn_mask, made, choice, corroborated
+
+    def _alone(self, channels, location, gaps, seen, made, wanted, learn_mask, names):
+        """The ``names`` fills (and ``interp``) as each fills the take's gaps alone: the pair at
+        clip ends (neither is judged there) and the medoid's voters on the gaps with two keys;
+        those ``made`` for every gap already are the same ({} where no names)."""
+        if not names:
+            return {}
         whole = np.array_equal(wanted, gaps)
-        same = {name: made[name] for name in alone_names if whole and name in made
+        same = {name: made[name] for name in names if whole and name in made
                 and (name != "learn" or np.array_equal(learn_mask, gaps))}
-        paired_ends = {**self.candidates(channels, location, gaps, ("interp", *(
-            name for name in alone_names if name not in same)), seen), **same} if alone_names else {}
-        agreed = self._ends_agreed(paired_ends, runs, ends)
-        wanted = learn_mask
+        return {**self.candidates(channels, location, gaps, ("interp", *(
+            name for name in names if name not in same)), seen), **same}
+
+    def _onward(self, runs, choice, estimates, corroborated, pull, trusted, longest, unjudged,
+                mid, agreed, agree):
+        """What each gap's fill goes on to (the cubic, ``learn``, the consensus at ``agree`` of the
+        way, the pair at a clip end), kept on the job for :func:`fill_bones`' choices."""
+        cfg = self.cfg
         towards = self.consensus_fills
-        agree = cfg.consensus if wanted.any() and set(towards) <= set(made) else 0.0
         self.choices, self.estimates, self.corroborated = choice, estimates, corroborated
         self.cubic = [pull * (1 - share) if share < 1 and self.short(a, e) else 0.0
                       for (_, a, e), (_, share) in zip(runs, choice)]
@@ -936,13 +967,17 @@ class _Job:
         for i in np.flatnonzero(agreed):  # on from the fill and its consensus, if any
             self.consensus[i] = 1 - (1 - self.consensus[i]) * (1 - cfg.ends_share)
             self.towards[i] = self.consensus_fills
+
+    def _say(self, runs, choice, corroborated, pull, agreed):
+        """What ``auto`` did to the gaps, in one line for ``trace`` (``--verbose``)."""
+        cfg = self.cfg
         counts, partly = {}, {}
         for name, share in choice:
             name = name if share else "interp"  # doubted all the way back
             counts[name] = counts.get(name, 0) + 1
             partly[name] = partly.get(name, 0) + (0 < share < 1)
         onwards = "; ".join(
-            f"{n} {'long' if onto == towards else 'mid-length'} gaps "
+            f"{n} {'long' if onto == self.consensus_fills else 'mid-length'} gaps "
             f"{'to the mean of' if on == 1 else f'{on:.0%} of the way on to'} {' + '.join(onto)}"
             for (on, onto), n in Counter((on, onto) for on, onto in zip(self.consensus,
                                                                         self.towards) if on
@@ -965,8 +1000,13 @@ class _Job:
                if any(self.learnt) else "")
             + (f"; {sum(agreed)} gaps at a clip end {cfg.ends_share:.0%} of the way on to "
                f"{' + '.join(self.consensus_fills)}, which agree there" if any(agreed) else ""))
-        if not wanted.any() and not agreed.any() and not any(both):
-            return seen
+
+    def _assembled(self, seen, runs, choice, corroborated, made, paired_ends, agreed, both):
+        """The take with each gap filled as chosen: from the interpolation ``seen`` its share
+        of the way to its fill (about the interpolation, with the pair's mean, the cubic and
+        ``learn`` where it goes on to them), then on to its consensus; last the fill the others
+        bear out in the place of a gap with two keys (:meth:`_medoid`)."""
+        cfg = self.cfg
         out = seen.copy()
         for (b, a, e), (name, share), further, onto, pair, cubic, to_learn, end in zip(
                 runs, choice, self.consensus, self.towards, corroborated, self.cubic,

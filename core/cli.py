@@ -365,6 +365,29 @@ def build_parser(extra=None):
     _add_read_options(p)
     p.set_defaults(func=cmd_kb_build)
 
+    _add_fill_commands(sub)
+    _add_evaluate(sub)
+
+    p = sub.add_parser("bench", help="speed of search, local models and fill per backend "
+                                     "(numpy, torch CPU/CUDA, cKDTree): medians and ratios")
+    p.add_argument("--quick", action="store_true", help="the 65k-pose / 2k-frame cases only")
+    p.add_argument("--repeat", type=int, default=3, help="runs per case (median)")
+    p.add_argument("--json", metavar="OUT", help="write the results as JSON")
+    p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("demo", help="fill synthetic takes with gaps (offline) and show the "
+                                    "accuracy on known truth")
+    p.add_argument("outdir", nargs="?", default="out", help="where to write (default: out)")
+    p.add_argument("--verbose", "-v", action="store_true",
+                   help="every step and every method compared, not only the summary")
+    p.set_defaults(func=cmd_demo)
+    if extra is not None:
+        extra(sub)
+    return parser
+
+
+def _add_fill_commands(sub):
+    """``fill`` and ``batch``."""
     p = sub.add_parser("fill", help="fill the gaps of a motion file")
     p.add_argument("input", help=f"{', '.join(READ_FORMATS)}")
     p.add_argument("-k", "--kb", help="knowledge base (.npz) for the auto, knn and pca methods "
@@ -420,6 +443,9 @@ def build_parser(extra=None):
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_batch)
 
+
+def _add_evaluate(sub):
+    """``evaluate``."""
     p = sub.add_parser("evaluate", help="accuracy of the methods on punched gaps in real data")
     p.add_argument("--protocol", required=True,
                    choices=["joints", "markers", "bodyparts", "shortgaps", "endgaps", "realgaps",
@@ -460,23 +486,6 @@ def build_parser(extra=None):
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_evaluate)
-
-    p = sub.add_parser("bench", help="speed of search, local models and fill per backend "
-                                     "(numpy, torch CPU/CUDA, cKDTree): medians and ratios")
-    p.add_argument("--quick", action="store_true", help="the 65k-pose / 2k-frame cases only")
-    p.add_argument("--repeat", type=int, default=3, help="runs per case (median)")
-    p.add_argument("--json", metavar="OUT", help="write the results as JSON")
-    p.set_defaults(func=cmd_bench)
-
-    p = sub.add_parser("demo", help="fill synthetic takes with gaps (offline) and show the "
-                                    "accuracy on known truth")
-    p.add_argument("outdir", nargs="?", default="out", help="where to write (default: out)")
-    p.add_argument("--verbose", "-v", action="store_true",
-                   help="every step and every method compared, not only the summary")
-    p.set_defaults(func=cmd_demo)
-    if extra is not None:
-        extra(sub)
-    return parser
 
 
 def main(argv=None, extra=None):
