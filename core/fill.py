@@ -347,62 +347,23 @@ def _with_fill(motion, out):
 
 def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg):
     """The knowledge-base fill and a rigid-body fill, blended per point by how well each refills
-    copies of the point's gaps on this take.
+    copies of the point's gaps on this take, then held to what the take keeps.
 
-    Each gap is copied (same points, same length, or shorter where the take has no room) to
-    nearby frames where its point is observed; both fill those copies (seeing, as the gaps'
-    fill will, what rigid partners carry closely through gaps longer than
-    ``spline_seconds``: :func:`_carried_closely`), and a point's gaps take
-    ``w * knn + (1 - w) * rigid`` with ``w = e_rigid / (e_knn + e_rigid)`` (``e``: mean squared
-    error on the point's copies: inverse-variance weights). Rigid partners go first: a point
-    they refill better than the knowledge base and within ``rigid_first`` (markers:
-    ``rigid_first_markers``) is theirs alone, and the knowledge base's fill of the
-    others sees it as observed. Points without copies keep the knowledge base's fill; samples
-    with no rigid donors (or points the knowledge base lacks) the one method that has them.
-    Rigid partners win on points that ride on a segment (head, pelvis, a hand's fingers), the
-    knowledge base where whole segments or long stretches are gone. The donors are chosen and
-    weighted by how steady their distance to the point is over the take
-    (:func:`~.baselines.rigid_estimates`). For markers the rigid estimate also reaches past the
-    gap's ends (``reach``), and its error on the copies is scaled at each frame by how
-    far its donors stray there against at the copies (:func:`_by_steadiness`); within it, the
-    marker's place among those partners regressed on further partners
-    (:func:`~.regression.regress_in_frame`: skin slides, a marker near a joint moves among its
-    donors) joins the rigid-body fill by their errors on the copies. Copies shorter
-    than the gaps do not vouch for the rigid estimate beyond its donors' spread
-    (``spread_cap``). On a marker set, a gap where more than ``body_gone`` of
-    the points are gone leaves the knowledge base out (:func:`_models_left_out_where_gone`: its
-    models see too little of the body). On points with long gaps
-    (``match_seconds``) the knowledge base's estimate is its models' fill and its
-    windows of motion (:func:`~.matching.fill_match`) weighted by their errors on the copies,
-    the windows only where they refill them better, and then the take's own regression of the
-    point on the rest of the body (:func:`~.regression.regress_points`), by its error on the
-    copies, and a partner's pattern where it refills them better still
-    (``pattern_floor``); without a knowledge base those two alone take its place, from
-    ``alone_seconds``. A spline through the take joins longer gaps where it refilled
-    the point's copies better than the fill is expected to do on the gap
-    (:func:`_with_spline_joined`: most of the body gone at once leaves far partners and models
-    that see little), and they lean towards it next to their ends (:func:`_with_spline_ends`);
-    short gaps (``spline_seconds``) are last blended with that spline and a partner's
-    pattern by their errors on copies of each gap (:func:`_with_spline`), those at a clip end
-    with the pattern from the one end alone, by errors on one-sided copies
-    (:func:`_with_pattern_ends`); a marker's gap where nearly all of the body is gone goes
-    ``all_gone_share`` of the way on to the take's own interpolator
-    (:func:`_with_all_gone_learnt`); holes no estimate reached (dropped frames without a
-    knowledge base) take the spline alone (:func:`_with_holes_splined`). That spline goes half
-    of the way on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's
-    windows of a gap's length say how its points move on from their keys) over short gaps and
-    where most of the body is gone (:func:`_learnt`). Last, the fill is moved onto the
-    distances the take keeps exactly, on a marker set towards those it keeps within a few
-    millimetres (:func:`_with_distances_kept`).
-    """
-    import threading
-    from concurrent.futures import ThreadPoolExecutor
-    from dataclasses import replace
-
-    from .baselines import rigid_estimates, steady_partners
-    from .matching import fill_match
-    from .recover import KnnSettings, fill_knn
-    from .regression import regress_in_frame, regress_points
+    Each gap is copied (same point, same length, or shorter where the take has no room) to
+    nearby frames where its point is observed (:func:`validation_gaps`), and every estimate
+    refills the copies as it will the gaps (:func:`_copies_refilled`; where rigid partners carry
+    a point closely through a gap, the knowledge base sees it there and at its copies). A
+    point's gaps take the knowledge base and the rigid partners by inverse errors on its copies
+    (:func:`_weighed`; on long gaps the knowledge base's estimate joined by its windows of
+    motion, the take's own regression and a partner's pattern, :func:`_with_long_gap_estimates`;
+    on a marker set its share follows the partners' spread per frame, :func:`_by_steadiness`,
+    and leaves the models out where most of the body is gone). The smooth track through the
+    take then joins by its errors on the copies (:func:`_with_smooth_track`), nearly-all-gone
+    gaps go part of the way on to the take's own interpolator, holes no estimate reached take
+    the spline, and the fill is moved onto the distances the take keeps
+    (:func:`_with_distances_kept`). Returns the filled motion and a :class:`GapAccount` per gap
+    (:func:`_accounts`)."""
+    from .recover import KnnSettings
 
     report = report or (lambda message: None)
     trace = trace or (lambda message: None)  # what each stage did, for --verbose
@@ -419,145 +380,42 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg
         long = (probe.any(axis=0) & (_mean_run(missing) >= seconds * motion.fps)
                 & (motion.parents is not None))
 
-    partners = {}  # the donors' statistics on this take, computed once
     donors = {}  # the pattern's, on the take with its copies hidden
-    # marker sets reach past the gap ends and let partners carry a marker alone within more
-    reach, alone = ((cfg.reach, cfg.rigid_first_markers) if motion.parents is None
-                    else (None, cfg.rigid_first))
-
-    stop = threading.Event()  # the fill ended early: the rigid estimates beside it stop too
-
-    def stopped():
-        return stop.is_set() or bool(should_cancel and should_cancel())
-
-    def carried(target, only=None):
-        rigid, spread = rigid_estimates(target.positions, cfg.donors, weighted=True,
-                                        partners=motion.positions, cache=partners,
-                                        reach=reach, should_cancel=stopped, only=only)
-        return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
-
-    def placed(target, only=None):  # a marker's place among its rigid partners, regressed
-        return regress_in_frame(target.positions,
-                                lambda p: steady_partners(motion.positions, p, partners), only,
-                                round(cfg.place_ends_seconds * motion.fps))
-
+    # marker sets let partners carry a marker alone within more
+    alone = cfg.rigid_first_markers if motion.parents is None else cfg.rigid_first
+    partners = _Partners(motion, should_cancel, cfg)
+    carried, placed, stop, stopped = (partners.carried, partners.placed, partners.stop,
+                                      partners.stopped)
     rigid, spread = carried(motion)
-    # the knowledge base's fill where there is none
-    nowhere = np.full(motion.positions.shape, np.nan) if kb is None else None
     # the copies are refilled as the gaps will be: where rigid partners carry a point closely
     # through a gap, the knowledge base sees it there (below), so it is seen at the copies too
     hidden = motion.replace(positions=np.where(
         probe[..., None], np.nan,
         np.where(_carried_closely(missing, spread, alone, motion.fps, cfg)[..., None], rigid,
                  motion.positions)))
-    # the rigid estimates and the windows need no local models: they run beside the first fill
-    # (numpy lets go of the interpreter in its products; the results are the same as one after
-    # the other)
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        markers = motion.parents is None and probe.any()
-        estimates = pool.submit(lambda: (carried(hidden) if probe.any() else (None, None),
-                                         (placed(hidden, probe), placed(motion)) if markers
-                                         else (None, None),
-                                         fill_match(hidden, kb, long, stopped).positions
-                                         if long.any() and kb is not None else None,
-                                         regress_points(hidden.positions, motion.names,
-                                                        probe & long[None])
-                                         if long.any() else None,
-                                         baselines.fill_pattern(hidden.positions,
-                                                                only=probe & long[None],
-                                                                cache=donors)
-                                         if long.any() else None))
-        try:
-            # one pass: its only use is to weigh the methods
-            scout = replace(settings, renormalise=False, max_iterations=min(
-                settings.max_iterations, cfg.copies_iterations), model_fps=min(
-                settings.model_fps or np.inf, cfg.copies_model_fps),
-                query_noise=cfg.copies_query_noise if settings.query_noise == "auto"
-                else settings.query_noise)
-            knn_copies = (None if not probe.any() else nowhere if kb is None else
-                          fill_knn(hidden, kb, scout, progress=lambda f, m: progress(0.5 * f, m),
-                                   should_cancel=should_cancel).positions)
-        except BaseException:
-            stop.set()  # cancelled or failed: the estimates stop at their next gap
-            raise
-        ((on_copies, copies_spread), (placed_copies, placed_gaps), matched, regressed,
-         patterned) = estimates.result()
-    weight = np.ones(motion.n_points)  # the knowledge base's share, per point
-    # within the knowledge base's estimate, the windows' share, the take's regression's and the
-    # partner's pattern's
-    windows, own, by_partner = (np.zeros(motion.n_points) for _ in range(3))
+    markers = motion.parents is None and probe.any()
+    (knn_copies, (on_copies, copies_spread), (placed_copies, placed_gaps), matched, regressed,
+     patterned) = _copies_refilled(hidden, motion, kb, probe, long, markers, carried, placed,
+                                   donors, settings, progress, should_cancel, stop, stopped, cfg)
     per_sample = np.full(motion.n_points, np.nan)  # the fill's squared error on its copies
     eased = {}  # gaps blended with a spline (and pattern): their shares and the error expected
-    if probe.any():
-        def on_copies_of(out):
-            """Per point, the squared error summed over its copies (a method that left some
-            copy unfilled: inf, not weighed against the other)."""
-            error = np.where(probe, np.sum((out - motion.positions) ** 2, axis=2), 0).sum(axis=0)
-            return np.nan_to_num(error, nan=np.inf)
 
-        e_knn, e_rigid = on_copies_of(knn_copies), on_copies_of(on_copies)
-        e_rigid = np.maximum(e_rigid, _spread_floor(missing, probe, spread, cfg))
-        if markers:  # the place among the partners joins the rigid estimate by its error
-            among = _joined(e_rigid, _on_copies_where(probe, on_copies_of, placed_copies,
-                                                      on_copies))[0]
-            on_copies = _mix_in(on_copies, placed_copies, among)
-            rigid = _mix_in(rigid, placed_gaps, among)
-            if (among > 0).any():
-                trace(f"auto: the place among its rigid partners, regressed on further "
-                       f"partners, joins the rigid estimate on {int((among > 0).sum())} of "
-                       f"{int(probe.any(axis=0).sum())} markers with copies")
-        seen = probe.any(axis=0)
-        e_kb = e_knn  # of the knowledge base's estimate: the models, with the windows on long gaps
-        if long.any():
-            # the windows join where they refilled the point's copies better than the models
-            if kb is not None:
-                windows, e_kb = _joined(e_knn, np.where(long, on_copies_of(matched), np.inf),
-                                        cfg.join_ramp)
-            # the take's own regression joins the knowledge base's estimate by its error
-            own, e_kb = _joined(e_kb, np.where(long, on_copies_of(regressed), np.inf))
-            # the partner's pattern where it refilled them better still, trusted no closer than
-            # its offset wanders over the take
-            e_pattern = np.maximum(on_copies_of(patterned), cfg.pattern_floor * probe.sum(
-                axis=0) * _offset_variance(missing, donors))
-            by_partner, e_kb = _joined(e_kb, np.where(long, e_pattern, np.inf), cfg.join_ramp)
-        with np.errstate(invalid="ignore"):
-            share = e_rigid / (e_kb + e_rigid)
-        weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
-                                np.isfinite(e_knn[seen]).astype(float))
-        # points their rigid partners carry alone
-        first = seen & (e_rigid < e_knn) & (e_rigid < alone ** 2 * probe.sum(axis=0))
-        weight[first] = 0.0
+    def on_copies_of(out):
+        return _on_copies(probe, motion.positions, out)
+
+    # the knowledge base's share per point, and within its estimate the windows', the take's
+    # regression's and the partner's pattern's; the errors on the copies of both sides
+    weight, (windows, own, by_partner), e_kb, e_rigid, on_copies, rigid = _weighed(
+        motion, probe, kb, long, alone, spread, on_copies_of, knn_copies,
+        (on_copies, rigid, placed_copies, placed_gaps, matched, regressed, patterned), donors,
+        trace, cfg)
     # the knowledge base has none of them: rigid partners carry them, or on long gaps the take's
     # own regression and a partner's pattern stand in for it (without a knowledge base too)
     weight[[p for p in map(motion.names.index, lacking) if own[p] == 0]] = 0.0
-    ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
-    # the knowledge base sees those as observed (they are never another point's donors: an
-    # estimate carried on would add its error to the next)
-    given = motion.replace(positions=np.where(ahead[..., None], rigid, motion.positions))
-    start = 0.5 if probe.any() else 0.0
-    # the points the knowledge base lacks are named below, with what became of them
-    knn = nowhere if kb is None else fill_knn(
-        given, kb, settings, progress=lambda f, m: progress(start + 0.5 * f, m),
-        should_cancel=should_cancel, report=report).positions
-    if long.any() and (windows > 0).any():
-        # matched as on the copies, over every point with long gaps (the stretches and the
-        # take's own windows a point gets depend on which others are matched with it)
-        knn = _mix_in(knn, fill_match(given, kb, long, should_cancel).positions, windows)
-        trace(f"auto: windows of the knowledge base's motion join its models on "
-               f"{int((windows > 0).sum())} points with gaps of {seconds:g} s or more")
-    if long.any() and (own > 0).any():
-        # on the rest of the body as the knowledge base sees it (the points rigid partners carry
-        # alone included), as the copies' regression saw it
-        knn = _mix_in(knn, regress_points(given.positions, motion.names,
-                                          missing & (own > 0)[None]), own)
-        trace(f"auto: the take's own regression on the rest of the body joins on "
-               f"{int((own > 0).sum())} points with gaps of {seconds:g} s or more")
-    if long.any() and (by_partner > 0).any():
-        knn = _mix_in(knn, baselines.fill_pattern(
-            given.positions, only=missing & (by_partner > 0)[None]), by_partner)
-        trace(f"auto: a partner's pattern joins the knowledge base's estimate on "
-               f"{int((by_partner > 0).sum())} points with gaps of {seconds:g} s or "
-               f"more")
+    start = 0.5 if probe.any() else 0.0  # of the progress: the copies' fill came first
+    knn = _kb_estimate(motion, rigid, weight, kb, long, (windows, own, by_partner), seconds,
+                       settings, lambda f, m: progress(start + 0.5 * f, m), should_cancel,
+                       report, trace)
     # the rigid donors' squared spread at each frame and on the mean of each point's copies
     spreads = _squared_spreads(probe, spread, copies_spread)
     harder = _harder_for_partners(*spreads)
@@ -573,46 +431,265 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg
             knn_copies = _mix_in(_mix_in(_mix_in(knn_copies, matched, windows), regressed, own),
                                  patterned, by_partner)
         copies = _blend(knn_copies, on_copies, weight)
-        smooth = _smooth_of(motion, cfg)
-        learnt, learnt_copies = _learnt(missing, probe, motion.fps, cfg)
-        spline = smooth(motion.positions, learnt)
-        # the spline with the copies hidden, for the longer gaps (none: a take of short dropouts)
-        hidden_spline = (smooth(np.where(probe[..., None], np.nan, motion.positions),
-                                learnt_copies)
-                         if _longer_gaps(missing, motion.fps, cfg) else None)
-        with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
-            per_sample = on_copies_of(copies) / probe.sum(axis=0)
-        def harder_at(p, a, b):  # how much harder than its copies a gap is for the fill
-            return harder(p, a, b, float(shares[a:b + 1, p].mean()))
-
-        out, eased = _with_spline_joined(motion, out, copies, probe, spline, hidden_spline,
-                                         harder_at, trace, cfg)
-        out = _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, weight == 0,
-                                trace, cfg)
-
-        def rigid_of(hidden):
-            return carried(motion.replace(positions=np.where(
-                hidden[..., None], np.nan, motion.positions)), hidden)[0]
-
-        out, short = _with_spline(motion, out, spline, per_sample, weight == 0, rigid_of, trace,
-                                  cfg)
-        eased.update(short)
-        out, at_ends = _with_pattern_ends(motion, out, per_sample, weight == 0, rigid_of, trace,
-                                          cfg)
-        eased.update(at_ends)
+        out, eased, per_sample = _with_smooth_track(motion, out, probe, copies, weight, shares,
+                                                    harder, carried, on_copies_of, trace, cfg)
     out, all_gone = _with_all_gone_learnt(motion, out, trace, cfg)
     out, holes = _with_holes_splined(motion, out, trace, cfg)
     eased.update({(p, a): (1.0, 0.0, float("nan")) for p, a in holes})
-    gappy = missing.any(axis=0)
-    rigidly = gappy & (weight < 0.5)
     if kb is not None:
-        trace(f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped "
-               f"points more than the knowledge base"
-               + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
-                  f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
+        trace(_rigidly_line(motion, weight))
     if lacking:
         report(_lacking_line(motion, out, lacking, kb is None))
+    accounts, uncertainty, hold = _accounts(motion, shares, eased, all_gone, per_sample, harder,
+                                            (windows, own, by_partner), cfg)
+    out = _with_distances_kept(motion, out, uncertainty, hold, trace, partners.cache, cfg)
+    return _with_fill(motion, out), accounts
+
+
+class _Partners:
+    """A take's rigid partners, their statistics computed once (``cache``): ``carried`` (the
+    rigid-body estimate of a target's missing points from ``donors`` partners; marker sets reach
+    past the gap ends, ``reach``) and ``placed`` (a marker's place among its partners,
+    regressed on further ones); both stop once ``stop`` is set or the user cancels."""
+
+    def __init__(self, motion, should_cancel, cfg):
+        import threading
+
+        self.motion, self.should_cancel, self.cfg = motion, should_cancel, cfg
+        self.cache = {}
+        self.reach = cfg.reach if motion.parents is None else None
+        self.stop = threading.Event()  # the fill ended early: the estimates beside it stop too
+
+    def stopped(self):
+        return self.stop.is_set() or bool(self.should_cancel and self.should_cancel())
+
+    def carried(self, target, only=None):
+        from .baselines import rigid_estimates
+
+        rigid, spread = rigid_estimates(target.positions, self.cfg.donors, weighted=True,
+                                        partners=self.motion.positions, cache=self.cache,
+                                        reach=self.reach, should_cancel=self.stopped, only=only)
+        return np.where(np.isnan(spread)[..., None], np.nan, rigid), spread
+
+    def placed(self, target, only=None):
+        from .baselines import steady_partners
+        from .regression import regress_in_frame
+
+        return regress_in_frame(
+            target.positions, lambda p: steady_partners(self.motion.positions, p, self.cache),
+            only, round(self.cfg.place_ends_seconds * self.motion.fps))
+
+
+def _copies_refilled(hidden, motion, kb, probe, long, markers, carried, placed, donors, settings,
+                     progress, should_cancel, stop, stopped, cfg):
+    """The copies (``probe``, hidden in ``hidden``) refilled by each estimate: the knowledge
+    base's models in one cheaper pass (its only use is to weigh the methods; ``copies_*``),
+    and beside it, in a thread (numpy lets go of the interpreter in its products; the results
+    are the same as one after the other), the rigid partners (``carried``), on a marker set the
+    place among them (``placed``, of the gaps too), and on ``long`` gaps the windows of motion,
+    the take's own regression and a partner's pattern. ``stop`` is set where the fill ends
+    early, so that the estimates beside it stop too (``stopped``). Returns ``(knn, (rigid,
+    spread), (placed_copies, placed_gaps), windows, regressed, pattern)``."""
+    from concurrent.futures import ThreadPoolExecutor
+    from dataclasses import replace
+
+    from .matching import fill_match
+    from .recover import fill_knn
+    from .regression import regress_points
+
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        estimates = pool.submit(lambda: (carried(hidden) if probe.any() else (None, None),
+                                         (placed(hidden, probe), placed(motion)) if markers
+                                         else (None, None),
+                                         fill_match(hidden, kb, long, stopped).positions
+                                         if long.any() and kb is not None else None,
+                                         regress_points(hidden.positions, motion.names,
+                                                        probe & long[None])
+                                         if long.any() else None,
+                                         baselines.fill_pattern(hidden.positions,
+                                                                only=probe & long[None],
+                                                                cache=donors)
+                                         if long.any() else None))
+        try:
+            scout = replace(settings, renormalise=False, max_iterations=min(
+                settings.max_iterations, cfg.copies_iterations), model_fps=min(
+                settings.model_fps or np.inf, cfg.copies_model_fps),
+                query_noise=cfg.copies_query_noise if settings.query_noise == "auto"
+                else settings.query_noise)
+            knn_copies = (None if not probe.any() else
+                          np.full(motion.positions.shape, np.nan) if kb is None else
+                          fill_knn(hidden, kb, scout, progress=lambda f, m: progress(0.5 * f, m),
+                                   should_cancel=should_cancel).positions)
+        except BaseException:
+            stop.set()  # cancelled or failed: the estimates stop at their next gap
+            raise
+        return (knn_copies, *estimates.result())
+
+
+def _with_smooth_track(motion, out, probe, copies, weight, shares, harder, carried, on_copies_of,
+                       trace, cfg):
+    """``out`` with the smooth track through the take (a spline, part of the way on to the
+    take's own interpolator: :func:`_smooth_of`, :func:`_learnt`) weighed in by its errors on
+    the copies (``copies``: the fill of them): longer gaps join it where it refilled them
+    better than the fill is expected to do (:func:`_with_spline_joined`) and lean to it near
+    their ends (:func:`_with_spline_ends`); short gaps are blended with it and a partner's
+    pattern (:func:`_with_spline`), those at a clip end from their one key
+    (:func:`_with_pattern_ends`; ``carried``: the rigid partners' estimate). Returns ``(out,
+    eased, per_sample)``: the gaps it eased (their shares and the error expected) and the
+    fill's squared error per copied sample of each point."""
+    smooth = _smooth_of(motion, cfg)
+    learnt, learnt_copies = _learnt(motion.missing, probe, motion.fps, cfg)
+    spline = smooth(motion.positions, learnt)
+    # the spline with the copies hidden, for the longer gaps (none: a take of short dropouts)
+    hidden_spline = (smooth(np.where(probe[..., None], np.nan, motion.positions),
+                            learnt_copies)
+                     if _longer_gaps(motion.missing, motion.fps, cfg) else None)
+    with np.errstate(invalid="ignore", divide="ignore"):  # points without copies: nan
+        per_sample = on_copies_of(copies) / probe.sum(axis=0)
+
+    def harder_at(p, a, b):  # how much harder than its copies a gap is for the fill
+        return harder(p, a, b, float(shares[a:b + 1, p].mean()))
+
+    out, eased = _with_spline_joined(motion, out, copies, probe, spline, hidden_spline,
+                                     harder_at, trace, cfg)
+    out = _with_spline_ends(motion, out, copies, probe, spline, hidden_spline, weight == 0,
+                            trace, cfg)
+
+    def rigid_of(hidden):
+        return carried(motion.replace(positions=np.where(
+            hidden[..., None], np.nan, motion.positions)), hidden)[0]
+
+    out, short = _with_spline(motion, out, spline, per_sample, weight == 0, rigid_of, trace,
+                              cfg)
+    eased.update(short)
+    out, at_ends = _with_pattern_ends(motion, out, per_sample, weight == 0, rigid_of, trace,
+                                      cfg)
+    eased.update(at_ends)
+    return out, eased, per_sample
+
+
+def _kb_estimate(motion, rigid, weight, kb, long, parts, seconds, settings, progress,
+                 should_cancel, report, trace):
+    """The knowledge base's fill of the gaps (NaN without one), seeing the points the rigid
+    partners carry alone (``weight`` 0) as observed (they are never another point's donors: an
+    estimate carried on would add its error to the next); on ``long`` gaps joined by its
+    windows, the take's own regression and a partner's pattern at the shares ``parts``."""
+    from .recover import fill_knn
+
+    ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
+    given = motion.replace(positions=np.where(ahead[..., None], rigid, motion.positions))
+    # (the points it lacks are named later, with what became of them)
+    knn = np.full(motion.positions.shape, np.nan) if kb is None else fill_knn(
+        given, kb, settings, progress=progress, should_cancel=should_cancel,
+        report=report).positions
+    if long.any():
+        knn = _with_long_gap_estimates(knn, given, motion.missing, kb, long, parts, seconds,
+                                       should_cancel, trace)
+    return knn
+
+
+def _with_long_gap_estimates(knn, given, missing, kb, long, parts, seconds, should_cancel,
+                             trace):
+    """The knowledge base's estimate ``knn`` of the points with ``long`` gaps joined, at the
+    shares ``parts`` (per point), by its windows of motion, the take's own regression on the
+    rest of the body and a partner's pattern, each made on the take as the knowledge base sees
+    it (``given``: the points rigid partners carry alone included) for its gaps (``missing``)."""
+    from .matching import fill_match
+    from .regression import regress_points
+
+    windows, own, by_partner = parts
+    if (windows > 0).any():
+        # matched as on the copies, over every point with long gaps (the stretches and the
+        # take's own windows a point gets depend on which others are matched with it)
+        knn = _mix_in(knn, fill_match(given, kb, long, should_cancel).positions, windows)
+        trace(f"auto: windows of the knowledge base's motion join its models on "
+               f"{int((windows > 0).sum())} points with gaps of {seconds:g} s or more")
+    if (own > 0).any():
+        # on the rest of the body as the knowledge base sees it (the points rigid partners carry
+        # alone included), as the copies' regression saw it
+        knn = _mix_in(knn, regress_points(given.positions, given.names,
+                                          missing & (own > 0)[None]), own)
+        trace(f"auto: the take's own regression on the rest of the body joins on "
+               f"{int((own > 0).sum())} points with gaps of {seconds:g} s or more")
+    if (by_partner > 0).any():
+        knn = _mix_in(knn, baselines.fill_pattern(
+            given.positions, only=missing & (by_partner > 0)[None]), by_partner)
+        trace(f"auto: a partner's pattern joins the knowledge base's estimate on "
+               f"{int((by_partner > 0).sum())} points with gaps of {seconds:g} s or "
+               f"more")
+    return knn
+
+
+def _on_copies(probe, truth, out):
+    """Per point, the squared error of ``out`` against ``truth`` summed over its copies
+    (``probe``; a method that left some copy unfilled: inf, not weighed against the other)."""
+    error = np.where(probe, np.sum((out - truth) ** 2, axis=2), 0).sum(axis=0)
+    return np.nan_to_num(error, nan=np.inf)
+
+
+def _weighed(motion, probe, kb, long, alone, spread, on_copies_of, knn_copies, estimates, donors,
+             trace, cfg):
+    """Per point, the knowledge base's share against the rigid partners' by their errors on the
+    point's copies (inverse-variance weights; the rigid error no lower than its donors' spread
+    allows, :func:`_spread_floor`; points the partners refill within ``alone`` theirs alone),
+    and within the knowledge base's estimate on long gaps the shares of its windows, the take's
+    own regression and a partner's pattern (each joining where it refilled the copies better,
+    :func:`_joined`). On a marker set the marker's place among its partners joins the rigid
+    estimate first. ``estimates``: the rigid partners' on the copies and the gaps, the place's
+    on both, the windows', the regression's and the pattern's on the copies. Returns
+    ``(weight, (windows, own, by_partner), e_kb, e_rigid, rigid_copies, rigid)``."""
+    on_copies, rigid, placed_copies, placed_gaps, matched, regressed, patterned = estimates
+    missing, markers = motion.missing, motion.parents is None
+    weight = np.ones(motion.n_points)
+    windows, own, by_partner = (np.zeros(motion.n_points) for _ in range(3))
+    if not probe.any():  # nothing to weigh by: the knowledge base's where it has the point
+        return weight, (windows, own, by_partner), None, None, on_copies, rigid
+    e_knn, e_rigid = on_copies_of(knn_copies), on_copies_of(on_copies)
+    e_rigid = np.maximum(e_rigid, _spread_floor(missing, probe, spread, cfg))
+    if markers:  # the place among the partners joins the rigid estimate by its error
+        among = _joined(e_rigid, _on_copies_where(probe, on_copies_of, placed_copies,
+                                                  on_copies))[0]
+        on_copies = _mix_in(on_copies, placed_copies, among)
+        rigid = _mix_in(rigid, placed_gaps, among)
+        if (among > 0).any():
+            trace(f"auto: the place among its rigid partners, regressed on further "
+                   f"partners, joins the rigid estimate on {int((among > 0).sum())} of "
+                   f"{int(probe.any(axis=0).sum())} markers with copies")
+    seen = probe.any(axis=0)
+    e_kb = e_knn  # of the knowledge base's estimate: the models, with the windows on long gaps
+    if long.any():
+        # the windows join where they refilled the point's copies better than the models
+        if kb is not None:
+            windows, e_kb = _joined(e_knn, np.where(long, on_copies_of(matched), np.inf),
+                                    cfg.join_ramp)
+        # the take's own regression joins the knowledge base's estimate by its error
+        own, e_kb = _joined(e_kb, np.where(long, on_copies_of(regressed), np.inf))
+        # the partner's pattern where it refilled them better still, trusted no closer than
+        # its offset wanders over the take
+        e_pattern = np.maximum(on_copies_of(patterned), cfg.pattern_floor * probe.sum(
+            axis=0) * _offset_variance(missing, donors))
+        by_partner, e_kb = _joined(e_kb, np.where(long, e_pattern, np.inf), cfg.join_ramp)
+    with np.errstate(invalid="ignore"):
+        share = e_rigid / (e_kb + e_rigid)
+    weight[seen] = np.where(np.isfinite(share[seen]), share[seen],
+                            np.isfinite(e_knn[seen]).astype(float))
+    # points their rigid partners carry alone
+    first = seen & (e_rigid < e_knn) & (e_rigid < alone ** 2 * probe.sum(axis=0))
+    weight[first] = 0.0
+    return weight, (windows, own, by_partner), e_kb, e_rigid, on_copies, rigid
+
+
+def _accounts(motion, shares, eased, all_gone, per_sample, harder, parts, cfg):
+    """Per gap its :class:`GapAccount` (the estimates' shares: the knowledge base's side
+    ``shares`` split by ``parts``, the windows', the take's regression's and the pattern's share
+    of it per point; the spline's and pattern's from ``eased``; grown where nearly all of the
+    body is gone, ``all_gone``) and its squared error expected (``per_sample`` scaled by
+    ``harder``); the samples each gap expects to err by, and those held in place when the
+    distances are kept (a marker's short gaps, where the spline and a partner's pattern come
+    closer than a few millimetres of sliding skin). Returns ``(accounts, uncertainty, hold)``."""
     accounts = []
+    windows, own, by_partner = parts
+    missing = motion.missing
     uncertainty = np.zeros(missing.shape)  # each gap's squared error expected
     # a marker's short gaps, where the spline and a partner's pattern come closer than a few
     # millimetres of sliding skin, hold their place when the distances are kept
@@ -636,8 +713,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg
             windows=float(models * windows[p] * (1 - own[p])), own=float(models * own[p]),
             spline=float(spline_share), pattern=float(pattern_share + kb_share * by_partner[p]),
             estimate=float(np.sqrt(squared)) if np.isfinite(squared) else float("nan")))
-    out = _with_distances_kept(motion, out, uncertainty, hold, trace, partners, cfg)
-    return _with_fill(motion, out), accounts
+    return accounts, uncertainty, hold
 
 
 def _with_distances_kept(motion, out, uncertainty, hold, report, partners, cfg):
@@ -682,6 +758,16 @@ def _with_distances_kept(motion, out, uncertainty, hold, report, partners, cfg):
                + f": median {1000 * np.median(moved):.1f} mm, at most "
                f"{1000 * moved.max():.1f} mm")
     return kept
+
+
+def _rigidly_line(motion, weight):
+    """``auto``'s trace of the gapped points rigid partners carry more than the knowledge base."""
+    gappy = motion.missing.any(axis=0)
+    rigidly = gappy & (weight < 0.5)
+    return (f"auto: rigid partners carry {int(rigidly.sum())} of {int(gappy.sum())} gapped "
+            f"points more than the knowledge base"
+            + (f" ({', '.join(motion.names[p] for p in np.flatnonzero(rigidly)[:8])}"
+               f"{'...' if rigidly.sum() > 8 else ''})" if rigidly.any() else ""))
 
 
 def _lacking_line(motion, out, lacking, no_kb):
