@@ -39,7 +39,7 @@ from .posing import best_rotation
 #: donors of a rigid-body fill
 RIGID_DONORS = 3
 #: metres: a point's donors form a rigid body with it where each stays this steady (SD of the
-#: distance) against it and the other donors (:func:`_donors`; tuned, docs/METHOD_NOTES.md)
+#: distance) against it and the other donors (:func:`_donors`; tuned, docs/DESIGN.md)
 RIGID_TOGETHER = 0.005
 #: metres: donors steadier than this against a point (SD of the distance) are alike to
 #: :func:`_donors` (on a skeleton many joints ride exactly on one segment and their spreads
@@ -58,7 +58,7 @@ CARRIED_PAD = 3
 #: in one batch
 NEAREST_CHUNK = 1 << 20
 #: :func:`fill_learned`: frames beyond each gap end it reads, windows a point it fits on at
-#: most, and the fewest windows of a gap's length it fits on (docs/METHOD_NOTES.md, session 65);
+#: most, and the fewest windows of a gap's length it fits on (docs/DESIGN.md);
 #: at most this many window frames over all points in one fit (fewer windows a point for long
 #: gaps of many points: memory)
 LEARNED_KEYS = 4

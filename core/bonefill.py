@@ -128,7 +128,7 @@ KB_FILLS = ("knn", "half", "recall", "match", "mix")
 #: what ``auto`` chooses from beside ``interp`` without a knowledge base (a rig no starter one
 #: fits, none chosen): the take's own fills, stacked as :data:`STACK_FILLS` and
 #: :data:`LONG_STACK_FILLS` are without those of :data:`KB_FILLS` (chosen on non-test takes,
-#: docs/METHOD_NOTES.md, session 37)
+#: docs/DESIGN.md)
 TAKE_ALONE_CANDIDATES = ("hermite", "regress", "regress_kernel", "learn")
 TAKE_ALONE_CONSENSUS = ("regress_kernel",)
 TAKE_ALONE = ("auto fills from the take alone (its own regression, a cubic and Blender's "
@@ -142,15 +142,15 @@ class BoneConfig:
 
     #: ``auto`` judges ``learn`` only on gaps shorter than this (seconds) with keys either side (the
     #: bone's own interpolator gains on gaps of 0.125-0.25 s and loses from 0.5 s on the non-test
-    #: takes; at a clip's end it holds the key; docs/METHOD_NOTES.md, session 61)
+    #: takes; at a clip's end it holds the key; docs/DESIGN.md)
     learn_seconds: float = 0.4
     #: the part of such a gap that ``auto`` keeps of the interpolation goes this share of the way on
     #: to ``learn`` where the bone's own windows of the gap's length say that ``learn`` loses (by 10
     #: % + 2 mm) no more than ``learn_trust`` of them (hundreds per bone where the three copies of a
-    #: gap are a noisy judge; docs/METHOD_NOTES.md, session 63)
+    #: gap are a noisy judge; docs/DESIGN.md)
     learn_pull: float = 0.25
     learn_trust: float = 0.03
-    #: how far ``mix`` goes from ``hermite`` towards ``match`` (tuned, docs/METHOD_NOTES.md)
+    #: how far ``mix`` goes from ``hermite`` towards ``match`` (tuned, docs/DESIGN.md)
     mix_share: float = 0.25
     stack_ridge: float = 0.3
     #: gaps of this many seconds or more for which no candidate passes on the copies take
@@ -158,12 +158,12 @@ class BoneConfig:
     #: ``stack`` (``regress_pose``: ``regress`` on the other bones' pose at the frame alone;
     #: ``regress_kernel``: ``regress`` with a Gaussian kernel beside the linear one); in a take
     #: without copies, those of its long gaps that other bones' gaps overlap, in equal parts (tuned,
-    #: docs/METHOD_NOTES.md)
+    #: docs/DESIGN.md)
     long_stack: float = 0.75
     #: a gap of ``long_stack`` seconds or more that does not keep the interpolation goes this share
     #: of the way from its fill to the mean of :data:`CONSENSUS_FILLS`: the knowledge base's motion
     #: and the take's own regression, estimates that owe each other and the copies' choice little
-    #: (chosen on non-test takes, docs/METHOD_NOTES.md, session 35)
+    #: (chosen on non-test takes, docs/DESIGN.md)
     consensus: float = 0.5
     #: a gap at a clip's end (one key: Blender holds it) where those two agree - lie apart by less
     #: than ``corroborated`` times their mean departure from the held key (RMS over the joints the
@@ -171,68 +171,67 @@ class BoneConfig:
     #: its copies, with keys at both ends, judge its fills against an interpolation far stronger
     #: than the held key, and two estimates from different evidence that bear each other out say
     #: what the key lacks (:meth:`_Job._ends_agreed`; chosen by leave-one-subject-out on non-test
-    #: takes, docs/METHOD_NOTES.md, session 68)
+    #: takes, docs/DESIGN.md)
     ends_share: float = 1.0
     #: last, each gap with keys at both ends takes, of its fill and these (each filling the take's
     #: gaps alone), the one that lies nearest the others (the least summed RMS distance over the
     #: joints its bone moves): fills from different evidence fail on different gaps, and the one the
     #: others bear out is the one least likely to have failed (:meth:`_Job._medoid`; chosen on
-    #: non-test takes, docs/METHOD_NOTES.md, session 69), in a take with copies of its gaps
+    #: non-test takes, docs/DESIGN.md), in a take with copies of its gaps
     medoid_fills: tuple = ("match", "regress", "learn")
     #: in a take with copies, a gap from ``learn_seconds`` up to ``mid_learn_seconds`` with keys
     #: beyond its keys (too long for ``learn`` to be judged) goes this share of the way on from its
     #: fill to ``learn``, the bone's own interpolator: alone it carries the keys' motion too far at
     #: that length, a part of it steadies whatever the copies chose (chosen on non-test takes,
-    #: docs/METHOD_NOTES.md, session 64: at 0.67 s it lost gaps, at 1 s it did not pay)
+    #: docs/DESIGN.md: at 0.67 s it lost gaps, at 1 s it did not pay)
     mid_learn: float = 0.2
     mid_learn_seconds: float = 0.6
     #: where the take has copies, every gap shorter than ``long_stack`` goes from ``interp`` towards
     #: the chosen fill only as far as the stacked fills agree on the gap (:meth:`_Job._doubted`):
-    #: the weight of their spread against the departure from ``interp`` (tuned,
-    #: docs/METHOD_NOTES.md; ``stack_long`` went undoubted in session 26)
+    #: the weight of their spread against the departure from ``interp`` (tuned, docs/DESIGN.md;
+    #: ``stack_long`` goes undoubted)
     auto_doubt: float = 0.1
     #: and then only as far as its departure from ``interp`` stands out of the fill's own error on
     #: the gap's copies: the share is cut by ``max(0, 1 - auto_wary * E / A)``, ``E`` the fill's
     #: mean squared joint error expected from the copies, ``A`` the gap's squared departure (a
-    #: shrinkage towards the interpolation; chosen on non-test takes, docs/METHOD_NOTES.md, session
-    #: 50)
+    #: shrinkage towards the interpolation; chosen on non-test takes, docs/DESIGN.md)
     auto_wary: float = 0.1
     #: then the part of the interpolation such a gap keeps (``1 - share``) goes this share of the
     #: way on to the mean of the two stacked fills (those of :data:`STACK_FILLS` but ``interp``)
     #: that agree on the gap - lie apart by less than ``corroborated`` times their mean departure
     #: from the interpolation, the closest such pair: two estimates from different evidence (the
     #: keys' motion, the rest of the body, the knowledge base) that bear each other out
-    #: (:meth:`_Job._corroborated`; chosen on non-test takes, docs/METHOD_NOTES.md, session 57)
+    #: (:meth:`_Job._corroborated`; chosen on non-test takes, docs/DESIGN.md)
     corroborate: float = 0.5
     corroborated: float = 0.45
     #: on a gap where ``learn`` is judged (under ``learn_seconds``, keys beyond its keys), ``learn``
     #: - how the bone's own motion and the bones about it go on over the gap - may be one of that
     #: pair; a pair with it moves the kept part this share of the way instead (half of the way lost
-    #: gaps on the held-back takes; chosen on non-test takes, docs/METHOD_NOTES.md, session 66)
+    #: gaps on the held-back takes; chosen on non-test takes, docs/DESIGN.md)
     corroborate_learn: float = 0.42
     #: and where the take's copies, all of them together, favour the cubic (``hermite``) over the
     #: interpolation - their mean log ratio of its squared joint error to the interpolation's lies
     #: below ``-cubic_trust`` - the part such a gap kept goes ``min(cubic_pull, -mean -
     #: cubic_trust)`` of the way on to the cubic: a gap's own few copies judge it against the bar of
     #: ``promote_short``, the take's hundreds tell whether its motion suits the cubic at all (chosen
-    #: on non-test takes, docs/METHOD_NOTES.md, session 58)
+    #: on non-test takes, docs/DESIGN.md)
     cubic_trust: float = 0.5
     cubic_pull: float = 0.5
     #: ``regress``: the other bones' channels this many seconds either side count too; fitted within
-    #: this many seconds of the gap, with this ridge penalty per frame (tuned, METHOD_NOTES)
+    #: this many seconds of the gap, with this ridge penalty per frame (tuned, docs/DESIGN.md)
     regress_lags: tuple = (0.05, 0.1)
     regress_window: float = 3.0
     regress_ridge: float = 0.1
     #: in a take too short for copies, without a knowledge base, a gap of ``long_gap`` seconds or
     #: more goes this share of the way from ``interp`` to ``regress_kernel`` (a shorter one takes
     #: ``hermite``): unjudged, so part of the way (chosen on 1.5 s cuts of non-test takes,
-    #: docs/METHOD_NOTES.md, session 37)
+    #: docs/DESIGN.md)
     take_alone_unjudged: float = 0.5
     #: ``auto`` takes a candidate for a gap where its error on the gap's copies is below this share
     #: of interpolation's (the better candidate where both are), on gaps of ``long_gap`` seconds or
     #: more and on shorter ones, where interpolation is hard to beat: part of the way there below
     #: ``promote_short``, all the way only below ``promote_short_whole`` (tuned on non-test
-    #: subjects, docs/METHOD_NOTES.md)
+    #: subjects, docs/DESIGN.md)
     promote: float = 0.9
     promote_short: float = 0.7
     promote_short_whole: float = 0.3
@@ -245,49 +244,49 @@ class BoneConfig:
     long_gap: float = 0.5
     #: in a take without copies, a long gap that ``match`` fills unjudged goes this share of the way
     #: on to the mean of :data:`CONSENSUS_FILLS` (1: the mean itself; chosen on non-test takes,
-    #: docs/METHOD_NOTES.md, session 47)
+    #: docs/DESIGN.md)
     unjudged_consensus: float = 1.0
     #: in a take without copies, a long gap keeps the interpolation where it and ``regress`` lie
     #: within this share of ``match``'s distance from the nearer of them (RMS over the joints the
-    #: gap moves; :meth:`_Job._outvoted`; chosen on non-test takes, docs/METHOD_NOTES.md)
+    #: gap moves; :meth:`_Job._outvoted`; chosen on non-test takes, docs/DESIGN.md)
     outvoted: float = 0.5
     #: copies of each gap ``auto`` refills, and the frames kept between a copy and any gap
     auto_copies: int = 3
     #: a gap of this many seconds or more that fewer than ``auto_copies`` copies of its own fit
     #: takes ``stack_long``: the take's other copies do not speak for it (chosen on non-test takes,
-    #: docs/METHOD_NOTES.md)
+    #: docs/DESIGN.md)
     few_copies: float = 1.5
     copy_margin: int = 10
     #: ``hermite`` carries the velocities at a gap's ends as if the gap lasted at most this long
     hermite_seconds: float = 0.5
     #: ``learn``, the take's own interpolator (:func:`~.rig.learned_rotations`): keys beyond each
     #: gap's keys it reads, and its ridge (none: the bone's own windows, hundreds of them, pin its
-    #: few weights; docs/METHOD_NOTES.md, session 61)
+    #: few weights; docs/DESIGN.md)
     learn_keys: int = 4
     learn_ridge: float = 0.0
     #: ``learn``'s bones that tell of a gapped one: those within this many joints of it; the ridges
     #: (shares of the mean diagonal) of what their own fits miss, the one that predicts each half of
-    #: the take's windows best from the other (docs/METHOD_NOTES.md, session 62)
+    #: the take's windows best from the other (docs/DESIGN.md)
     learn_hops: int = 2
     learn_body_ridges: tuple = (0.1, 0.3, 1.0)
     #: how fast (m/s) the interpolation of a gap is taken to drift from the truth, per second to the
-    #: nearest key: how far ``knn`` lets the knowledge base move a joint (tuned, METHOD_NOTES)
+    #: nearest key: how far ``knn`` lets the knowledge base move a joint (tuned, docs/DESIGN.md)
     guess_speed: float = 0.1
     #: weight of the current (interpolated) rotation in each gapped bone's fit, as a share of the
-    #: fitted joints' spread about the bone's head (pseudo-points; tuned, docs/METHOD_NOTES.md)
+    #: fitted joints' spread about the bone's head (pseudo-points; tuned, docs/DESIGN.md)
     stay: float = 0.5
     #: seconds of context either side of a gap that ``match`` compares, and how much the gapped
     #: bones count there against any other bone
     match_context: float = 0.5
     match_context_weight: float = 4.0
     #: seconds of the pieces ``match`` matches a stretch in, where one bone is gapped there and
-    #: where several are (tuned, docs/METHOD_NOTES.md)
+    #: where several are (tuned, docs/DESIGN.md)
     match_piece: float = 0.5
     match_piece_many: float = 1.0
     match_own: bool = True
     match_damp: bool = True
     #: the windows' mean leans to a window that stands out (:func:`~.matching.match_windows`'
-    #: ``lean``; session 77, docs/METHOD_NOTES.md)
+    #: ``lean``; docs/DESIGN.md)
     match_lean: bool = True
 
 
@@ -503,7 +502,7 @@ class _Job:
         for b, a, e in gap_runs(gaps):
             # from the nearer end, at a clip end too: measured from the one key, the models
             # pull its far frames further from the held key, and knn's clip ends lost (ASF/AMC
-            # tuning takes 1.07 of this per take-setting, docs/METHOD_NOTES.md, session 68)
+            # tuning takes 1.07 of this per take-setting, docs/DESIGN.md)
             away = stacking.from_keys(e - a + 1) / self.fps
             joints = self.moved_by(b)
             doubt[a:e + 1, joints] = np.maximum(doubt[a:e + 1, joints],
@@ -1123,7 +1122,7 @@ class _Job:
         an error (mean squared, per joint and frame; NaN: unknown), by ``max(0, 1 - auto_wary *
         expected / a)``, ``a`` the mean squared departure so cut: a gap calmer than its copies
         departs little beyond the fill's own error, and keeps about the interpolation (the
-        gaps the fill lost, docs/METHOD_NOTES.md, sessions 38 and 50). Longer gaps keep their
+        gaps the fill lost, docs/DESIGN.md and 50). Longer gaps keep their
         fill."""
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (name, _)) in enumerate(zip(runs, choice))
                  if name != "interp" and self.short(a, e)]
@@ -1170,8 +1169,8 @@ class _Job:
         gap's bone moves), where that share is below ``corroborated``: the cubic from the
         keys, the take's own regression and the knowledge base's motion owe each other nothing,
         so where two of them agree on a motion the interpolation lacks, it is there (on the
-        non-test takes, docs/METHOD_NOTES.md, session 57). ``learns`` (per gap, or None): where
-        ``learn`` may be one of the two (``corroborate_learn``; session 66). None
+        non-test takes, docs/DESIGN.md). ``learns`` (per gap, or None): where
+        ``learn`` may be one of the two (``corroborate_learn``). None
         elsewhere."""
         fills = [f for f in self.stack_fills if f != "interp"]
         spans = [(i, b, a, e - a + 1) for i, ((b, a, e), (_, share)) in enumerate(zip(runs, choice))

@@ -10,14 +10,14 @@ how uncertain each is (a seen sample does not move), sweeping over the pairs one
 (Gauss-Seidel, as position-based dynamics does). A joint between two seen ones keeps only its
 turn about their line to be wrong; one on a seen segment, nothing. Markers on one segment keep
 their distances only within a few millimetres (skin slides): a pair is then a measurement of its
-distance with that spread, weighed against the ends' uncertainties (docs/METHOD_NOTES.md,
-session 48); as a body turns its joints such a distance drifts, so a gap may aim part of the way
-from the take's mean distance to the pair's own about the gap (session 67).
+distance with that spread, weighed against the ends' uncertainties (docs/DESIGN.md); as a body
+turns its joints such a distance drifts, so a gap may aim part of the way from the take's mean
+distance to the pair's own about the gap.
 """
 
 import numpy as np
 
-#: sweeps over the pairs (docs/METHOD_NOTES.md, session 48)
+#: sweeps over the pairs (docs/DESIGN.md)
 SWEEPS = 20
 
 

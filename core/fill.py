@@ -31,23 +31,23 @@ class AutoConfig:
     #: validation gaps (copies of its gaps) per point for ``auto``, and for skeleton joints more
     #: where those hold fewer frames than ``probe_frames`` (five copies of 3-frame dropouts weigh
     #: the methods on 15 samples; on marker sets rigid partners carry nearly every marker with short
-    #: gaps alone either way, and the extra copies only cost time: docs/METHOD_NOTES.md); a point
-    #: whose copies hold fewer frames, markers too, has its gaps copied again, further off (one copy
-    #: alone misjudged a marker's one gap, the last 15 frames of a take: 24 mm where its rigid
-    #: partners alone made 4.5; docs/METHOD_NOTES.md, session 44)
+    #: gaps alone either way, and the extra copies only cost time: docs/DESIGN.md); a point whose
+    #: copies hold fewer frames, markers too, has its gaps copied again, further off (one copy alone
+    #: misjudged a marker's one gap, the last 15 frames of a take: 24 mm where its rigid partners
+    #: alone made 4.5; docs/DESIGN.md)
     probes: int = 5
     probe_frames: int = 30
     #: metres: on a marker set, pairs whose distance strays by at most this much (SD) are kept last,
-    #: each as far as its spread lets it (docs/METHOD_NOTES.md, session 48); a skeleton keeps its
-    #: exact ones (baselines.RIGID_TIE) exactly
+    #: each as far as its spread lets it (docs/DESIGN.md); a skeleton keeps its exact ones
+    #: (baselines.RIGID_TIE) exactly
     kept_spread: float = 0.005
     #: on a marker set each such pair aims this share of the way from the take's mean distance to
     #: its own distance about the gap (interpolated from where both ends are seen): the distance
-    #: drifts as the body turns its joints (docs/METHOD_NOTES.md, session 67)
+    #: drifts as the body turns its joints (docs/DESIGN.md)
     kept_local: float = 0.5
     #: ... and, at a frame where one of its ends is seen, counts as this many times its variance: a
     #: marker alone in a gap is placed among its seen partners already, and the error its gap
-    #: expects (from copies) is right on the mean, not per gap (docs/METHOD_NOTES.md, session 72)
+    #: expects (from copies) is right on the mean, not per gap (docs/DESIGN.md)
     kept_seen: float = 2.0
     #: donors of ``auto``'s rigid-body estimate
     donors: int = 3
@@ -75,56 +75,52 @@ class AutoConfig:
     #: fit; on marker sets the windows never refilled the copies better, and cost time); and the
     #: take's own regression of the point on the points seen through the gap
     #: (:func:`~.regression.regress_points`), weighted by its errors on the copies (on shorter gaps
-    #: and on marker sets it misled the copies: docs/METHOD_NOTES.md, "Session 22"); without a
-    #: knowledge base the regression (and the pattern below) alone stand in for it (session 73),
-    #: from ``alone_seconds``
+    #: and on marker sets it misled the copies: docs/DESIGN.md); without a knowledge base the
+    #: regression (and the pattern below) alone stand in for it, from ``alone_seconds``
     match_seconds: float = 1.0
     #: without a knowledge base the take's own regression and a partner's pattern join a skeleton
     #: joint whose gaps last this many seconds on the mean (with one they would mislead the models
     #: on shorter gaps; without one they are weighed against the rigid partners alone:
-    #: docs/METHOD_NOTES.md, "Session 74")
+    #: docs/DESIGN.md)
     alone_seconds: float = 0.5
     #: on those points a partner's pattern (:func:`~.baselines.fill_pattern`) joins the knowledge
     #: base's estimate too where it refills the copies better still, its error on them raised to at
     #: least this many times the variance of its offset to its steadiest partner seen through the
     #: gaps: short copies of a limb gone for seconds flatter a partner whose offset wanders (a leg
-    #: follows the other through jumps and squats, not through a walk; docs/METHOD_NOTES.md,
-    #: "Session 41")
+    #: follows the other through jumps and squats, not through a walk; docs/DESIGN.md)
     pattern_floor: float = 0.5
     #: the windows and the partner's pattern join only where they refilled the copies better than
     #: the rest of the knowledge base's estimate, their share opening gradually: 0 at equal errors,
     #: the full inverse-error share where that share is this far above one half (a step there let
-    #: rounding at the thousandth of a mm flip a point's fill: docs/METHOD_NOTES.md, "Session 42")
+    #: rounding at the thousandth of a mm flip a point's fill: docs/DESIGN.md)
     join_ramp: float = 0.1
     #: gaps of at most this many seconds are also blended with a spline through the take
     #: (:func:`_with_spline`), by its error on up to ``spline_copies`` copies of each gap, kept
     #: ``spline_margin`` frames from any gap and within ``spline_reach`` gap lengths of theirs
-    #: (tuned, docs/METHOD_NOTES.md: over longer gaps a spline's error has a tail that its copies do
-    #: not foresee)
+    #: (tuned, docs/DESIGN.md: over longer gaps a spline's error has a tail that its copies do not
+    #: foresee)
     spline_seconds: float = 0.2
     #: longer gaps take the spline where it refilled their copies better than the fill is expected
     #: to do on the gap (:func:`_with_spline_joined`), its error on the copies taken this many times
-    #: over: that tail (chosen on the tuning takes, docs/METHOD_NOTES.md, session 54: as many gains,
-    #: fewer losses than at 1)
+    #: over: that tail (chosen on the tuning takes, docs/DESIGN.md: as many gains, fewer losses than
+    #: at 1)
     spline_tail: float = 2.0
     #: where more than this share of the points is gone on the mean over a gap, an estimate of it is
     #: taken to be off by at least its RMS distance from the spline through the take less
     #: ``off_spline`` times the spline's expected RMS error, whatever its copies said
-    #: (:func:`_off_the_spline`; chosen on the tuning takes, docs/METHOD_NOTES.md, session 55: 0.3
-    #: and 0.7 gave the same; at 1 time the spline's error the gains were the same, the losses
-    #: larger)
+    #: (:func:`_off_the_spline`; chosen on the tuning takes, docs/DESIGN.md: 0.3 and 0.7 gave the
+    #: same; at 1 time the spline's error the gains were the same, the losses larger)
     body_gone: float = 0.5
     off_spline: float = 2.0
     #: there, a short gap's fill is expected to err this many times (squared) what its copies said,
     #: where more of the body was seen (:func:`_with_spline`; chosen on the tuning takes,
-    #: docs/METHOD_NOTES.md, session 56: 2, 4, 8 and leaving the fill out gained 0.6-1.2 %, the
-    #: losses growing with it)
+    #: docs/DESIGN.md: 2, 4, 8 and leaving the fill out gained 0.6-1.2 %, the losses growing with
+    #: it)
     gone_doubt: float = 4.0
     #: the smooth track through the take that all of the above weigh (the spline) goes this share of
     #: the way on to the take's own interpolator (:func:`~.baselines.fill_learned`: the take's
     #: windows of each gap's length say how its points move on from their keys; chosen on the tuning
-    #: takes, docs/METHOD_NOTES.md, session 65: the whole way gained as much on the mean and lost
-    #: more on some takes)
+    #: takes, docs/DESIGN.md: the whole way gained as much on the mean and lost more on some takes)
     learned: float = 0.5
     #: ... on gaps of up to this many seconds (the longest the tuning takes' bursts had)
     learned_seconds: float = 0.5
@@ -132,28 +128,27 @@ class AutoConfig:
     #: mean over a marker's gap longer than ``spline_seconds`` and of up to ``learned_seconds``,
     #: both ends in the take - its fill goes ``all_gone_share`` of the way on to the take's own
     #: interpolator: the few partners and the models that see a few points stray further than their
-    #: copies foretell (chosen on the tuning takes, docs/METHOD_NOTES.md, session 66)
+    #: copies foretell (chosen on the tuning takes, docs/DESIGN.md)
     all_gone: float = 0.9
     all_gone_share: float = 0.5
     #: beside the partner's pattern, a marker's short gap at a clip end joins the take's own
     #: interpolator from its one key (:func:`~.baselines.fill_learned_ends`) by its inverse error on
-    #: one-sided copies times this weight (chosen on the tuning takes, docs/METHOD_NOTES.md, session
-    #: 65: at weight 1 more gain, a larger worst case; a skeleton's joints lost by it)
+    #: one-sided copies times this weight (chosen on the tuning takes, docs/DESIGN.md: at weight 1
+    #: more gain, a larger worst case; a skeleton's joints lost by it)
     learned_ends_weight: float = 0.5
     #: and only on gaps of up to this many seconds (on the tuning takes it gained on every take at
     #: 0.025 and 0.05 s, and lost on some at 0.1 s)
     learned_ends_seconds: float = 0.05
     #: a marker's place among its rigid partners (:func:`~.regression.regress_in_frame`) fills a gap
     #: at a clip's end, from its one end, only if it lasts this many seconds or more (shorter ones
-    #: went astray on the tuning takes, where the partner's pattern carries them:
-    #: docs/METHOD_NOTES.md, session 46)
+    #: went astray on the tuning takes, where the partner's pattern carries them: docs/DESIGN.md)
     place_ends_seconds: float = 0.1
     spline_copies: int = 4
     spline_margin: int = 10
     spline_reach: int = 4
     #: beside the spline, the pattern fill (the steadiest partner's trajectory, offset to the gap's
     #: ends: it follows a turn inside the gap that the spline cuts) joins short gaps by its inverse
-    #: error on the same copies at this weight (docs/METHOD_NOTES.md, sessions 35-36)
+    #: error on the same copies at this weight (docs/DESIGN.md)
     pattern_weight: float = 0.5
     #: longer gaps lean towards the same spline near their ends (:func:`_with_spline_ends`), by a
     #: weight per distance from the nearer end: the least-squares share of the copies' frames at
@@ -166,7 +161,7 @@ class AutoConfig:
     #: (at most this many a second), stops after fewer iterations than the fill of the gaps and
     #: takes this query-noise factor (the one ``models.UNCHECKED_FACTOR`` uses where nothing can be
     #: checked) instead of choosing one (same accuracy on the tuning takes, 0.8-0.9x the time:
-    #: docs/METHOD_NOTES.md, "Session 25")
+    #: docs/DESIGN.md)
     copies_model_fps: float = 15.0
     copies_iterations: int = 10
     copies_query_noise: float = 0.25
@@ -726,7 +721,7 @@ def _with_distances_kept(motion, out, uncertainty, hold, report, partners, cfg):
     (where unknown: the largest known, else 1 m^2; at least :data:`~.baselines.RIGID_TIE`
     squared); the samples of ``hold`` (a marker's short gaps) keep their place. The gaps'
     estimates stay those of the fill before: moved alike, the copies (more points hidden at
-    once) judged the move worse than it is on the gaps (docs/METHOD_NOTES.md, session 48).
+    once) judged the move worse than it is on the gaps (docs/DESIGN.md).
     ``partners``: the rigid fill's statistics of the take (:func:`~.baselines.steady_partners`),
     where its pairs' spreads may be kept already."""
     from .distances import keep_distances
@@ -805,7 +800,7 @@ def _harder_for_partners(squared, on_copies):
     steadiest partners are out of sight too is filled worse than the copies foretell), the
     knowledge base's part as it is. Where either spread is unknown, 1. On the
     CMU marker tuning takes this ranked each take's gaps closer to how they came out (Spearman
-    0.50-0.52 -> 0.56-0.60; docs/METHOD_NOTES.md, session 34)."""
+    0.50-0.52 -> 0.56-0.60; docs/DESIGN.md)."""
     known = np.isfinite(squared)
     sums = np.vstack([np.zeros((1, squared.shape[1])), np.cumsum(np.where(known, squared, 0),
                                                                  axis=0)])
@@ -844,8 +839,8 @@ def _by_steadiness(weight, e_kb, e_rigid, squared, on_copies):
     scaled at each frame by its donors' squared spread there (``squared``) against their mean
     over the copies (``on_copies``; both from :func:`_squared_spreads`): a marker's copies
     vouch for its rigid partners only as far as they stay as steady as at the copies (chosen on
-    the CMU C3D tuning takes, docs/METHOD_NOTES.md, session 45; a skeleton's joints did worse
-    with it, session 34). Points the partners carry alone, points the knowledge base alone fills
+    the CMU C3D tuning takes, docs/DESIGN.md; a skeleton's joints did worse
+    with it). Points the partners carry alone, points the knowledge base alone fills
     and frames without a spread keep ``weight`` (a share strictly between 0 and 1 came from two
     finite errors)."""
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -860,8 +855,7 @@ def _models_left_out_where_gone(missing, shares, knn, cfg):
     out of each marker's gap where more than ``body_gone`` of the points are gone on the
     mean over it: its models see too little of the body there, and the gap is filled as a take
     without a knowledge base fills it (the rigid partners left, then the spline and the take's
-    own interpolator; chosen on the CMU C3D tuning takes' bursts, docs/METHOD_NOTES.md, session
-    67)."""
+    own interpolator; chosen on the CMU C3D tuning takes' bursts, docs/DESIGN.md)."""
     gone = [(p, a, b) for p, a, b in gap_runs(missing) if _body_gone(missing, a, b, cfg.body_gone)]
     if not gone:
         return shares, knn
@@ -945,7 +939,7 @@ def _with_spline_joined(motion, out, copies, probe, spline, hidden_spline, harde
     # a fill that left some of its copies open is no rival to the spline
     e_fill[np.isnan(e_fill) & longer.any(axis=0)] = np.inf
     # where most of the body is gone, the spline carried by its partners' strays joins it
-    # (chosen on the tuning takes, docs/METHOD_NOTES.md, session 56)
+    # (chosen on the tuning takes, docs/DESIGN.md)
     gone = np.zeros_like(probe)
     for p, a, b in gaps:
         gone[a:b + 1, p] = _body_gone(motion.missing, a, b, cfg.body_gone)
@@ -1252,7 +1246,7 @@ def _with_pattern_ends(motion, out, e_out, rigid_alone, rigid_of, report, cfg):
     carried = np.zeros_like(ends)  # the gaps short enough for it, at their first frames
     for p, a, b, _ in copies:
         carried[a, p] = b - a + 1 <= cfg.learned_ends_seconds * motion.fps
-    # (a skeleton's joints lost by it: docs/METHOD_NOTES.md, session 65)
+    # (a skeleton's joints lost by it: docs/DESIGN.md)
     if motion.parents is None and carried.any():
         learned = fill_learned_ends(motion.positions, only=carried)
         learned_error = _round_errors(rounds, motion.positions, lambda hidden: fill_learned_ends(

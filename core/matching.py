@@ -22,7 +22,7 @@ SPEEDS = (0.8, 0.9, 1.0, 1.12, 1.25)
 #: windows averaged per stretch
 TOP = 5
 #: ``lean``: the best windows, near copies of each other included, whose distinct ones make the
-#: second set (tuned, docs/METHOD_NOTES.md, session 77)
+#: second set (tuned, docs/DESIGN.md)
 LEAN = 10
 
 

@@ -16,14 +16,14 @@ from .search import KBIndex
 
 @dataclass(frozen=True)
 class KnnSettings:
-    """Settings of the ``knn`` method (the paper's weights; see docs/METHOD_NOTES.md).
+    """Settings of the ``knn`` method (the paper's weights; see docs/DESIGN.md).
 
     ``k`` None means 4096 neighbours, or the whole knowledge base when it is smaller: on our
     knowledge bases (7k-100k poses) accuracy kept improving up to K = 2048-4096, unlike the
     paper's K = 256 on the whole CMU database. What matters is how far the neighbourhood
     reaches, not how many poses the model sees: each local model is fitted to a random
     ``model_neighbours`` of the K (same accuracy within 2 %, a quarter of the cost at K = 4096;
-    docs/METHOD_NOTES.md).
+    docs/DESIGN.md).
     """
 
     k: int = None
@@ -121,7 +121,7 @@ def fit_models(index, queries, mask, settings, rng):
     """Search each query's K neighbours over its present points (``~mask``) and fit its local
     model; also its spread: how far the query lies from its neighbours, per coordinate, times
     the missing share. With a noise level far below that, the components chase the difference
-    and may extrapolate wildly into the missing points (see docs/METHOD_NOTES.md).
+    and may extrapolate wildly into the missing points (see docs/DESIGN.md).
 
     Returns the :func:`local_pca` arrays (means, comps, lams, noise) and the spread (q,).
     """

@@ -36,14 +36,14 @@ LEAST = 20
 #: weight of the Gaussian kernel beside the linear one, as a share of the linear kernel's mean
 #: (its bandwidth: the median squared distance between training frames); at most
 #: ``KERNEL_FRAMES`` training frames, evenly spaced over those of the take (tuned on non-test
-#: takes, docs/METHOD_NOTES.md, session 32)
+#: takes, docs/DESIGN.md)
 KERNEL = 0.3
 KERNEL_FRAMES = 800
 #: :func:`regress_in_frame`: the partners that make a marker's frame, the further partners
 #: whose coordinates in it are the features (at most; at least ``FRAME_LEAST_FEATURES``), the
 #: penalty per fitted frame; the frame's donors may be this many times less steady (RMS
 #: spread) than the marker's steadiest partners (tuned on non-test takes,
-#: docs/METHOD_NOTES.md, session 46)
+#: docs/DESIGN.md)
 FRAME_DONORS = 3
 FRAME_FEATURES = 6
 FRAME_LEAST_FEATURES = 3

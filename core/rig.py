@@ -473,7 +473,7 @@ def hermite_rotations(turns, gaps, damping=None):
     vector, zero at both keys) that makes it leave the key before the gap and reach the key
     after it with the angular velocities those keys show (one-frame steps). Near an Euler
     angle's gimbal lock a bone's channels race while the bone itself turns slowly; their
-    velocities carried into a gap turned bones by radians (docs/METHOD_NOTES.md, session 37).
+    velocities carried into a gap turned bones by radians (docs/DESIGN.md).
     ``damping`` as there."""
     out = np.array(turns, dtype=float)
     for b, a, e, s, span, scale in _cubic_spans(gaps, damping):

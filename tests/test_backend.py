@@ -96,7 +96,7 @@ def test_auto_parity_with_long_gaps(device, kb, data_dir):
     which differ between backends in the thousandths of a mm; no gate may turn on that. With
     a step gate, and each point's windows matched only with the others that took them, this
     fill gave 21.06 / 20.77 mm on numpy / torch-cpu in a plain script on the CI machine's kind
-    (20.77 / 20.77 under the BLAS kernel the tests choose; docs/METHOD_NOTES.md, session 42)."""
+    (20.77 / 20.77 under the BLAS kernel the tests choose; docs/DESIGN.md)."""
     take = read_motion(data_dir / DAZ / "13/13_30.bvh.gz", skip_frames=6).frame_range(0, 2048)
     miss = punch_gaps(take.n_frames, take.n_points, "joints", (6, 120),
                       np.random.default_rng(0))

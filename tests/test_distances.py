@@ -198,7 +198,7 @@ def test_a_marker_alone_in_a_gap_trusts_its_seen_partners_distances_half_as_much
     pair's ends is seen its variance counts twice (``AutoConfig.kept_seen``). CMU 01_01 (a tuning
     take) at 120 fps, a KB of the other CMU tuning takes, one random marker gone for 30 frames
     in every 150 (when written: 2.94 mm against 3.02 with the variance as it is, `rigid` 3.66;
-    on the four CMU tuning takes, docs/METHOD_NOTES.md session 72: 0.969 of before on such gaps,
+    on the four CMU tuning takes, docs/DESIGN.md: 0.969 of before on such gaps,
     0.9925 over 62 take-settings of the marker protocols)."""
     c3d = data_dir / "cmu/c3d"
     kb = build_kb([c3d / f"{t}.c3d" for t in ("02_05", "06_01", "135_02")], fps=120.0)

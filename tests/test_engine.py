@@ -461,7 +461,7 @@ def test_auto_regresses_long_gaps_on_what_the_knowledge_base_sees(daz_kb, data_d
     missed by 32 mm where its copies said 7 (KB of every non-test subject). When written: 3.75
     mm, 8.84 with the regression on the take as it came (rigid 2.63, knn 23.4). Session 48: 4.56,
     the distances kept take the head, 42 mm off between a seen neck and eyes in one gap, to its
-    mirror image across their plane (which it crosses where seen; docs/METHOD_NOTES.md)."""
+    mirror image across their plane (which it crosses where seen; docs/DESIGN.md)."""
     take = complete_take(read_motion(data_dir / DAZ / "13/13_10.bvh.gz", skip_frames=6),
                          daz_kb.names, 60.0)
     label = "m=3,l=90"
@@ -1234,7 +1234,7 @@ def test_local_models_are_shared_above_model_fps(data_dir):
 
 def test_local_models_fitted_to_a_sample_of_a_wide_neighbourhood(daz_kb, walk):
     """The default fits each local model to a random 1,024 of K = 4096 neighbours: the reach of
-    the neighbourhood is what matters, not the count (docs/METHOD_NOTES.md). On a walk of a
+    the neighbourhood is what matters, not the count (docs/DESIGN.md). On a walk of a
     held-out subject, a random quarter of the neighbours does within 5 % of all of them."""
     from dataclasses import replace
 
@@ -1357,7 +1357,7 @@ def test_auto_without_a_knowledge_base_regresses_a_joint_gone_for_seconds_on_the
     copies against the rigid partners (they stood in for the knowledge base only where there
     was one). ASF/AMC 07_05, a tuning take, at 60 fps, six joints gone for 2 s at a time: when
     written 26.1 mm, before 68.7, `rigid` 70.0 (non-test takes at l >= 1 s, new / before:
-    ASF/AMC 0.63, Daz 0.71; docs/METHOD_NOTES.md, session 73)."""
+    ASF/AMC 0.63, Daz 0.71; docs/DESIGN.md)."""
     take = complete_take(read_motion(data_dir / "cmu/asfamc/07/07_05.amc"), None, 60.0)
     alone, rigid, messages, _ = _alone_and_rigid(take, "joints", (6, 120), b"m=6,l=120")
     assert alone < 0.5 * rigid
@@ -1369,7 +1369,7 @@ def test_auto_without_a_knowledge_base_regresses_a_joint_gone_for_half_a_second(
     """Without a knowledge base the take's own regression joins from half a second
     (``AUTO_ALONE_SECONDS``; with one, from a second). Daz 07_05, a tuning take, six joints
     gone for 0.5 s at a time: when written 15.0 mm, from a second on 42.3, `rigid` 42.6 (non-test
-    takes at l = 30 frames, new / from a second on: 0.79; docs/METHOD_NOTES.md, session 74)."""
+    takes at l = 30 frames, new / from a second on: 0.79; docs/DESIGN.md)."""
 
     take = complete_take(walk, None)
     alone, rigid, messages, query = _alone_and_rigid(take, "joints", (6, 30), b"m=6,l=30")

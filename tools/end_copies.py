@@ -1,4 +1,4 @@
-"""Can copies of an armature's clip-end gaps choose their fill? (docs/METHOD_NOTES.md, session 71)
+"""Can copies of an armature's clip-end gaps choose their fill? (docs/DESIGN.md)
 
 ``auto`` judges a gap by copies of it placed where the bone is keyed, with keys at both ends.
 A gap at a clip end has one key (Blender holds it), so those copies judge its fills against an

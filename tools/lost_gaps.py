@@ -1,4 +1,4 @@
-"""What the armature default loses (issue 14; docs/METHOD_NOTES.md, session 38): the bones
+"""What the armature default loses (issue 14; docs/DESIGN.md): the bones
 protocol's gaps on the tuning takes of ``tools/tune_bones.py`` (never a test take; each subject
 out of a knowledge base that holds no test take), filled by ``auto``; per gap how it was filled
 (:class:`~mocap_gapfill.core.bonefill.GapChoice`), how far it moved the joints from Blender's
@@ -21,7 +21,7 @@ copies.
                                                    # 19 further non-test Daz takes instead;
                                                    # ENDS=1: protocol bone-ends, the gaps at
                                                    # the clip's ends)
-    python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of METHOD_NOTES, sessions 38, 52
+    python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of docs/DESIGN.md
     python tools/lost_gaps.py --tell OUT.jsonl     # how well each measure known at fill time
                                                    # tells the lost gaps (session 51; a FILLS run)
 """
@@ -44,7 +44,7 @@ from tune_bones import AMC, AMC_TUNING, DAZ, armature_kb, quiet_job
 DAZ_TUNING = "01_08 02_05 03_02 05_10 06_03 07_05 08_02 09_05 10_03 11_01 12_03 13_10".split()
 #: up to two more non-test Daz takes per subject (drawn with seed 58; 03 and 12 have one left,
 #: 11 none): the 12 above showed `auto` kinder against the cubic than unseen takes are
-#: (docs/METHOD_NOTES.md, session 58)
+#: (docs/DESIGN.md)
 DAZ_FURTHER = ("01_14 02_04 02_07 03_01 05_19 05_04 06_05 06_15 07_06 07_03 08_09 08_03 09_06 "
                "09_01 10_05 10_02 12_01 13_32 13_42").split()
 STEPS = np.linspace(0.0, 1.0, 21)

@@ -1,5 +1,5 @@
 """What a whole limb gone for half the take gets from each fill `auto` weighs (issue 15's body
-parts; docs/METHOD_NOTES.md, session 52): the `bodyparts` protocol on the twelve Daz tuning takes
+parts; docs/DESIGN.md): the `bodyparts` protocol on the twelve Daz tuning takes
 of ``tools/lost_gaps.py`` (never a test take; each subject out of a knowledge base that holds no
 test take), filled by `auto`, `knn`, the studio fills `rigid` and `pattern`, and alone by the
 take's own regression (`regression.regress_points`) and the knowledge base's windows of motion

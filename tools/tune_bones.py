@@ -4,7 +4,7 @@ candidate of ``bonefill.CANDIDATES`` on the bones protocol's gaps and on the gap
 subject out of the knowledge base (which holds no test take either). Writes one npz per take
 and setting (squared joint errors per gap and per copy, per candidate, and each candidate's squared
 deviation from ``interp``, ``*_dev``) for the selection rules
-to be compared offline (docs/METHOD_NOTES.md). Where ``match`` and ``hermite`` are among the
+to be compared offline (docs/DESIGN.md). Where ``match`` and ``hermite`` are among the
 candidates, blends of ``interp`` and ``hermite`` towards ``match`` are saved too
 (``interp_m0.25`` ... ``hermite_m1.0``: that share of the way to ``match``), and how far
 ``match`` and ``hermite`` disagree (``*_match_hermite_dev``, squared joint distance).

@@ -2,7 +2,7 @@
 the evaluation protocols' gaps and on their copies (``fill.validation_gaps``), on takes that are
 NOT test takes of docs/EVALUATION.md, the take's subject out of the KB. Writes one npz per take
 and setting (truth, gaps, copies, each candidate's fill of both) for the selection rules to be
-compared offline (docs/METHOD_NOTES.md).
+compared offline (docs/DESIGN.md).
 
     python tools/tune_default.py markers OUTDIR
     python tools/tune_default.py joints OUTDIR

@@ -1,6 +1,6 @@
-"""The armature default on long gaps that no copy judges (issue 14; docs/METHOD_NOTES.md,
-session 47): the bones protocol's take-settings at l >= 60 frames (seed 0) where no copy of any
-gap fits the take (``gap_copies`` empty), on every Daz take that is not a test take, or with
+"""The armature default on long gaps that no copy judges (docs/DESIGN.md): the bones protocol's
+take-settings at l >= 60 frames (seed 0) where no copy of any gap fits the take (``gap_copies``
+empty), on every Daz take that is not a test take, or with
 ``AMC=1`` on the ASF/AMC tuning takes; each subject out of a knowledge base that holds no test
 take (60 poses a second). ``auto`` filled with ``BoneConfig.unjudged_consensus`` set to SHARE
 (0: ``match`` unjudged, as before session 47; 1: the mean of ``match`` and ``regress_kernel``;
