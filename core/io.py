@@ -154,10 +154,26 @@ def atomic_output(path, overwrite=False):
     os.close(fd)
     try:
         yield Path(tmp)
+        # mkstemp makes it readable by its owner alone: as the user's umask wants a new file
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _umask():
+    """The process's file-creation mask: read where the system tells it (Linux), else set and
+    set back."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def write_motion(motion, path, overwrite=False):

@@ -1,5 +1,8 @@
 """Writers: round trips through C3D, NPZ and CSV; validation before ezc3d; atomic writes."""
 
+import os
+import stat
+
 import numpy as np
 import pytest
 
@@ -87,6 +90,28 @@ def test_writes_never_replace_silently_and_are_atomic(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.c3d"]
     write_motion(good, target, overwrite=True)
     assert read_motion(target).n_frames == 3
+
+
+@pytest.mark.parametrize("mask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
+def test_outputs_are_as_readable_as_the_umask_wants(tmp_path, mask, mode):
+    """Every writer goes through one atomic rename; the file it leaves has the mode a new file
+    gets under the user's umask (colleagues and a render farm read cleaned takes under 022),
+    not the owner-only mode of the temporary file it was written as."""
+    from mocap_gapfill.core import synth
+    from mocap_gapfill.core.kb import kb_from_motions
+
+    motion = Motion(np.zeros((3, 1, 3)), ("A",), 120.0)
+    old = os.umask(mask)
+    try:
+        paths = [tmp_path / f"take{suffix}" for suffix in (".c3d", ".npz", ".csv")]
+        for path in paths:
+            write_motion(motion, path)
+        kb = kb_from_motions([synth.take(synth.KB_GAITS[0], frames=30, fps=30.0)[1]])
+        paths.append(tmp_path / "kb.npz")
+        kb.save(paths[-1])
+    finally:
+        os.umask(old)
+    assert {oct(stat.S_IMODE(p.stat().st_mode)) for p in paths} == {oct(mode)}
 
 
 def test_unknown_output_format(tmp_path):
