@@ -52,7 +52,7 @@ def test_a_second_copy_of_a_marker_is_no_second_donor(data_dir, monkeypatch):
     """HDM05's unlabelled *0 *1 *2 are copies of three labelled markers: a donor and its copy,
     equally steady, were two of the three donors, and the third alone could not stop the fit
     turning about their line (C7 carried 130-470 mm off inside a 3-frame gap). Only the first
-    of points that are one is a donor now. (Since session 53 a turn the donors leave free is the
+    of points that are one is a donor now. (Now a turn the donors leave free is the
     least one, not the rounding's, which alone takes most of the harm out of such donors.)"""
     pos = _tumbling_body()
     pos = np.concatenate([pos[:, :1], pos[:, :1], pos[:, 1:]], axis=1)  # point 0 twice
@@ -75,7 +75,7 @@ def test_a_second_copy_of_a_marker_is_no_second_donor(data_dir, monkeypatch):
     least_turn = rmse_mm(fill(query, "rigid"), take, miss)
     monkeypatch.setattr(baselines, "LEAN", 0.0)  # the free turn the rounding's
     copies_as_donors = rmse_mm(fill(query, "rigid"), take, miss)
-    print(rigid, linear, copies_as_donors, least_turn)  # session 53: 2.5, 2.1, 52, 2.5 mm
+    print(rigid, linear, copies_as_donors, least_turn)  # earlier: 2.5, 2.1, 52, 2.5 mm
     assert copies_as_donors > 10 * rigid and rigid < 1.5 * linear
     assert least_turn < 1.2 * rigid
 

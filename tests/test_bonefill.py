@@ -144,11 +144,11 @@ def test_default_fill_beats_blender_interpolation_on_an_unseen_subject(walk, sou
     """Walk 07_05 (its subject out of the KB): a limb or spine bone loses its keys over every
     other stretch of 30 and of 120 frames. The default (auto: motion matching in rotation space,
     chosen per gap on copies of it, with the share of the way from the interpolation) beats the
-    interpolation on the short gaps (measured 7.6 vs 8.5 mm; 7.4 before session 50's ``auto_wary``)
-    and by far on the long ones (32.9 vs 110.9 mm, 42.5 before session 47's mean of `match` and
+    interpolation on the short gaps (measured 7.6 vs 8.5 mm; 7.4 before ``auto_wary``)
+    and by far on the long ones (32.9 vs 110.9 mm, 42.5 before the mean of `match` and
     `regress_kernel` for long gaps no copy fits; the bar: 0.7x), no gap comes out more than
     twice as bad + 5 mm, at most one in eight worse than 10 % + 2 mm (measured: 0 of 8, 0 of 2;
-    1 of 8 before session 50); keyed bones and frames are untouched. Each gap says how it was
+    1 of 8 before); keyed bones and frames are untouched. Each gap says how it was
     filled: where it kept the interpolation it is the interpolation, where it took a fill that
     the copies judged it is that far better on them. The same bars without a knowledge base (a
     rig no starter one fits: the take's own fills, judged on the same copies; the long gaps, too
@@ -221,7 +221,7 @@ def test_auto_in_a_take_without_copies_keeps_the_interpolation_where_it_and_regr
     is 153 mm off while Blender's interpolation (78 mm) and the take's own regression (53 mm)
     agree with each other: `auto` keeps the interpolation there. On the first they disagree
     (266 and 146 mm) and `match` (85 mm) stays, then goes on to the mean of `match` and
-    `regress_kernel` (session 47; 85 mm here too). Knowledge base: every other Daz subject at
+    `regress_kernel` (85 mm here too). Knowledge base: every other Daz subject at
     60 poses a second, as the bones protocol builds it."""
     rig, channels, location, fps = read_bvh_rig(data_dir / "cmu/bvh/daz_friendly/13/13_35.bvh.gz",
                                                 skip_frames=6)
@@ -450,7 +450,7 @@ def test_the_takes_own_interpolator_smooths_a_jittering_capture(data_dir, walk, 
     """The ASF/AMC walk 07_05 (a tuning take) jitters from frame to frame: the cubic carries
     one-frame steps into its gaps and loses to Blender's interpolation; ``learn``, fitted on
     the bone's own windows and corrected by its neighbours, does not (measured: three bones,
-    15 / 30 frames, learn 6.9 / 15.6 mm (session 61, without the neighbours: 11.4 / 21.0),
+    15 / 30 frames, learn 6.9 / 15.6 mm (without the neighbours: 11.4 / 21.0),
     hermite 15.9 / 35.6, interp 11.4 / 24.1; gaps lost to the interpolation 1 / 3 against 23 /
     6). On the Daz walk ``auto`` takes it on some gaps under 0.4 s, never on long ones."""
     rig, channels, location, fps = read_rig_take(data_dir / "cmu/asfamc/07/07_05.amc")
@@ -717,7 +717,7 @@ def test_the_interpolated_part_of_a_short_gap_goes_to_two_fills_that_agree(walk,
     changes; where ``learn`` is judged it may be one of the two. Then ``auto`` on the walk (its
     subject out of the KB; a bone gapped over every other stretch of 15 frames, at 120 fps) with
     and without it: measured 6.08 mm, without ``learn`` in the pairs 6.78, without any pair
-    6.87, the interpolation 8.87 mm (session 57, before ``learn``: 8.27 against 9.24, and
+    6.87, the interpolation 8.87 mm (before ``learn``: 8.27 against 9.24, and
     ``auto`` did not beat the interpolation without the pairs)."""
     rig, channels, location, fps = walk
     b = rig.names.index("lShldr")
@@ -783,8 +783,7 @@ def test_a_gap_at_a_clip_end_goes_to_the_consensus_where_its_two_fills_agree(wal
     keys at both ends, nothing changes. Then ``auto`` on the walk (its subject out of the KB):
     three bones keyless for the first second and three others for the last (the ``bone-ends``
     protocol's n=3, l=120), measured 47.1 mm with the rule and 53.0 without it, the held key
-    151.0 mm (session 68); 39.0 and 41.8 since ``match`` leans to a window that stands out
-    (session 77)."""
+    151.0 mm; 39.0 and 41.8 since ``match`` leans to a window that stands out."""
     rig, channels, location, fps = walk
     b = rig.names.index("lShldr")
     last = len(channels) - 1
@@ -821,7 +820,7 @@ def test_a_gap_with_two_keys_takes_the_fill_the_others_bear_out(walk, daz_kb):
     it keeps its own; a bone's gap and one of a bone below it that overlap are decided
     together. Then ``auto`` on the walk (its subject out of the KB) with the ``bones``
     protocol's gaps of 30 frames: measured 5.3 mm with the rule, 6.5 without it, the cubic 7.9,
-    Blender's interpolation 12.2 (session 69)."""
+    Blender's interpolation 12.2."""
     rig, channels, location, fps = walk
     b = rig.names.index("lShldr")
     gaps = np.zeros(channels.shape[:2], bool)
@@ -877,7 +876,7 @@ def test_a_take_whose_copies_favour_the_cubic_takes_it_on_the_short_gaps_it_kept
     noisier: they do not), the part of each short gap ``auto`` kept of the interpolation goes
     part of the way on to the cubic (``GapChoice.cubic``, said in the report); the bones
     protocol's gaps of 15 frames on 08_02: measured 4.43 against 4.92 mm without it (4.04 /
-    4.70 before ``learn`` was a candidate: a take-setting it costs, session 61), the cubic
+    4.70 before ``learn`` was a candidate: a take-setting it costs), the cubic
     alone 4.35, the interpolation 10.71; no gap worse than the interpolation by 10 % + 2 mm
     that was not before."""
     rig, channels, location, fps = read_rig_take(

@@ -457,8 +457,8 @@ def test_demo_is_the_main_job(tmp_path):
     assert all(real_bones[b][0] == real_bones[b][1] for b, by in how.items()
                if by == "kept Blender's curve")
     # measured 116.6 / 74.1 / 10.4 vs 128.2 / 86.0 / 7.2 mm: the chest's cubic and regression
-    # agree on a bend the take does not make (session 57: the kept interpolation went half way
-    # to them; 6.9 before, 103.7 / 87.5 / 7.2 in session 34; 11.3 before session 64's fifth of
+    # agree on a bend the take does not make (the kept interpolation went half way
+    # to them; 6.9 before, 103.7 / 87.5 / 7.2 earlier; 11.3 before the fifth of
     # the way on to learn): no gap more than twice as bad + 5
     # mm, the gaps together better
     assert all(fill <= 2 * interp + 5.0 for fill, interp in real_bones.values())

@@ -279,7 +279,7 @@ def test_auto_blends_knowledge_base_and_rigid_partners(daz_kb, data_dir):
     """auto = per point knn and a rigid-body fill weighted by their errors on copies of the
     gaps: at least as good as the better of the two, within 15 %, on markers of a jump turn
     (rigid partners win) and on joints of a walk with whole limbs gone (the KB wins). The bar
-    was 10 % until session 44, when the rigid fill got better donors for RKNE (41.4 -> 4.8 mm):
+    was 10 % until the rigid fill got better donors for RKNE (41.4 -> 4.8 mm):
     markers 19.7 -> 17.5 mm for auto, 22.9 -> 15.6 for rigid; auto still trails it on LWRA
     (29.2 against 24.0 mm), whose copies favour the knowledge base's share."""
     c3d = data_dir / "cmu/c3d"
@@ -380,9 +380,9 @@ def test_auto_leans_on_the_knowledge_base_where_a_markers_partners_stray(data_di
     error on the copies is scaled at each frame by its donors' spread there against at the
     copies (fill._by_steadiness). Tuning take 02_05 at 60 fps, 30 % of the markers gone per
     second, KB of 06_01 and 135_02. When written: 31.6 mm, 33.3 with one share per point (rigid
-    72.7); since the place among the partners joins the rigid estimate (session 46): 28.5 and
+    72.7); since the place among the partners joins the rigid estimate: 28.5 and
     29.9. Each gap's account holds its own mean share. Measured without the distances a marker
-    set keeps (session 48), which take both to 23.5 and 24.0 mm."""
+    set keeps, which take both to 23.5 and 24.0 mm."""
     from mocap_gapfill.core import fill as fill_module
 
     monkeypatch.setattr(fill_module, "_with_distances_kept", lambda motion, out, *rest: out)
@@ -411,7 +411,7 @@ def test_auto_weighs_short_dropouts_of_a_skeleton_on_enough_copied_frames(daz_kb
     the partners carry far better (8.1 against 43.8; KB of every non-test subject). Copies of
     such a joint go on until they hold 30 frames. When written, with this smaller KB: 3.55 mm,
     5.09 with five copies (rigid 2.70, spline 16.4, knn 20.1); since the partner's pattern joins
-    short gaps (session 36): 2.83 and 3.47."""
+    short gaps: 2.83 and 3.47."""
 
     take = complete_take(read_motion(data_dir / DAZ / "01/01_08.bvh.gz", skip_frames=6),
                          daz_kb.names, 60.0)
@@ -455,11 +455,11 @@ def test_auto_lets_a_partners_pattern_join_the_spline_in_short_dropouts(daz_kb, 
 
 def test_auto_regresses_long_gaps_on_what_the_knowledge_base_sees(daz_kb, data_dir):
     """The take's own regression of a joint gapped for seconds is weighed on copies refilled
-    seeing what rigid partners carry closely (session 29), so in the gaps it must see the
+    seeing what rigid partners carry closely, so in the gaps it must see the
     points they carry alone too. CMU 13_10 (a subject outside the KB, three joints gone per
     1.5 s): the head's regression in its gaps leant on other joints than on its copies and
     missed by 32 mm where its copies said 7 (KB of every non-test subject). When written: 3.75
-    mm, 8.84 with the regression on the take as it came (rigid 2.63, knn 23.4). Session 48: 4.56,
+    mm, 8.84 with the regression on the take as it came (rigid 2.63, knn 23.4). Earlier: 4.56,
     the distances kept take the head, 42 mm off between a seen neck and eyes in one gap, to its
     mirror image across their plane (which it crosses where seen; docs/DESIGN.md)."""
     take = complete_take(read_motion(data_dir / DAZ / "13/13_10.bvh.gz", skip_frames=6),
@@ -479,7 +479,7 @@ def test_auto_short_copies_do_not_vouch_for_rigid_partners_past_their_spread(daz
     it, and the rigid estimate, carried from the gap's ends by partners on the pelvis and the
     other leg, looks far better on them than it is in the gap. Its error is held at least at its
     donors' spread: 225.2 -> 139.5 mm when written (rigid 249.8, knn 92.0); with the windows of
-    motion that join the knowledge base's models on long gaps (session 18) 132.0 -> 72.7 mm."""
+    motion that join the knowledge base's models on long gaps 132.0 -> 72.7 mm."""
 
     take = read_motion(data_dir / DAZ / "03/03_02.bvh.gz", skip_frames=6)
     take = take.replace(positions=resample(take.positions, take.fps, 60.0), fps=60.0)
@@ -500,7 +500,7 @@ def test_auto_windows_of_motion_carry_a_limb_gone_for_seconds(daz_kb, walk, monk
     windows of the knowledge base's motion matched on the rest of the body over time do
     (`fill_match` 43.3 mm, `knn` 63.8 when written). `auto` weighs them in on points with gaps
     of a second or more where they refill the copies better: 174.3 -> 84.7 mm (92.6 since the
-    take's own regression joins them, session 22). Matched in
+    take's own regression joins them). Matched in
     chunks of 2 s instead of 4, the joins cross-fade: no jump, about the same error."""
     from mocap_gapfill.core import matching
     from mocap_gapfill.core.matching import fill_match
@@ -536,7 +536,7 @@ def test_windows_of_the_take_itself_carry_a_limb_gone_for_seconds(daz_kb, data_d
     """06_11 (9.5 s at 60 fps, subject out of the KB) with its left arm gone for the middle half
     (the `bodyparts` protocol): the take shows the same arm of the same subject in its first and
     last quarters, moving against a body that moves as it does in the gap; the knowledge base
-    holds other subjects only. Searched beside the knowledge base (session 40), windows of the
+    holds other subjects only. Searched beside the knowledge base, windows of the
     take carry the arm closer. Measured when written (mm): `fill_match` 172.1 -> 108.1, `auto`
     86.4 -> 62.8 (`rigid` 87.1)."""
     from mocap_gapfill.core import matching
@@ -563,7 +563,7 @@ def test_a_partners_pattern_carries_a_leg_that_follows_the_other(daz_kb, data_di
     """02_10 (subject out of the KB) with its left leg gone for the middle half (the `bodyparts`
     protocol): the leg keeps following the other one, so a partner's pattern (Vicon's pattern
     fill) refills its copies better than the knowledge base and the take's regression, by more
-    than its offset to the partner wanders over the take, and joins them (session 41).
+    than its offset to the partner wanders over the take, and joins them.
     Measured when written (mm): `auto` 55.9 -> 25.3, `pattern` 47.0."""
 
     take = read_motion(data_dir / DAZ / "02/02_10.bvh.gz", skip_frames=6)
@@ -590,7 +590,7 @@ def test_auto_the_takes_own_regression_carries_an_arm_gone_for_seconds(daz_kb, w
     protocol): the take's own frames where the arm is seen say how it swings against the rest
     of the body, which no knowledge base of other subjects does. Measured when written (mm):
     the regression alone 77.2, auto 81.4, auto without it 130.4, rigid 165.2, pattern 128.5;
-    with a Gaussian kernel beside the linear one (session 32) 62.4 and 71.5."""
+    with a Gaussian kernel beside the linear one 62.4 and 71.5."""
     from mocap_gapfill.core import regression
 
     kb = kb_without(daz_kb, "07")
@@ -608,7 +608,7 @@ def test_auto_the_takes_own_regression_carries_an_arm_gone_for_seconds(daz_kb, w
     scores = {"own": rmse_mm(query.replace(positions=own), walk, miss),
               **{m: rmse_mm(fill(query, m, kb=kb), walk, miss)
                  for m in ("auto", "rigid", "pattern")}}
-    monkeypatch.setattr(regression, "KERNEL", 0.0)  # the linear regression alone (session 22)
+    monkeypatch.setattr(regression, "KERNEL", 0.0)  # the linear regression alone
     scores["own, linear"] = rmse_mm(query.replace(positions=regression.regress_points(
         query.positions, query.names)), walk, miss)
     monkeypatch.setattr(regression, "LEAST", 10 ** 9)  # no gap has that many training frames
@@ -650,7 +650,7 @@ def test_a_markers_place_among_its_partners_regressed_beats_the_rigid_fill(data_
     partners' coordinates in that frame. Tuning take 02_05 at 60 fps, 10 % of the markers gone
     per second (the `markers` protocol). When written: on the samples it fills (3,000 of
     3,700) 6.1 mm against the rigid fill's 20.8; seen samples NaN. Gaps at the clip's ends take
-    the miss at their one end (session 46): 3,340 samples, 6.0 against 19.8."""
+    the miss at their one end: 3,340 samples, 6.0 against 19.8."""
     from mocap_gapfill.core import baselines, regression
 
     take = complete_take(read_motion(data_dir / "cmu/c3d/02_05.c3d"), None, 60.0)
@@ -697,9 +697,9 @@ def test_auto_beats_the_studio_fills_on_a_busy_marker_capture(data_dir):
     """30 % of 85_02's markers gone per half second (the `markers` protocol): a gap's ends often
     miss the point's steadiest partners, so auto's rigid estimate also carries it from the
     nearest frames where they are seen, and partners within 20 mm on the copies carry a marker
-    alone. Measured when written: auto 69.2 mm, rigid 107.1, knn 144.2, pattern 169.0 (session
-    7's auto, from the gap ends and within 5 mm: 106.9; session 15's, one pass over the copies
-    and the pelvis fitted to its markers seen: 66.1, knn 142.9). The pelvis is often in a gap:
+    alone. Measured when written: auto 69.2 mm, rigid 107.1, knn 144.2, pattern 169.0 (auto
+    from the gap ends and within 5 mm: 106.9; one pass over the copies and the pelvis fitted to
+    its markers seen: 66.1, knn 142.9). The pelvis is often in a gap:
     knn's second pass, normalised with it filled, is worth 12 % (one pass: 162.9)."""
     c3d = data_dir / "cmu/c3d"
     jump = read_motion(c3d / "85_02.c3d")
@@ -831,7 +831,7 @@ def test_auto_follows_a_spline_across_dropouts_of_a_few_frames(data_dir):
     when written (mm, 3 / 12 frames): auto 0.22 / 4.00, without the spline 1.19 / 8.28, spline
     0.19 / 9.03, rigid 1.06 / 8.30, pattern 1.64 / 10.98 (scoring the rigid estimate on the
     marker's own copies instead: auto 0.74 / 7.12). Since the place among the partners joins
-    the rigid estimate (session 46): auto 0.21 / 3.48, without the spline 0.75 / 4.94."""
+    the rigid estimate: auto 0.21 / 3.48, without the spline 0.75 / 4.94."""
 
     for length, take, kb, query, miss in _short_marker_gaps(data_dir, "85_02", "shortgaps"):
         scores = {m: rmse_mm(fill(query, m, kb=kb), take, miss)
@@ -954,7 +954,7 @@ def test_auto_doubts_a_fill_that_strays_from_the_spline_where_most_of_the_body_i
     inequality), whatever its copies said; the spline then takes the gap. Where few points are gone (the `markers`
     protocol at 10 %) nothing changes. Measured when written (mm): bursts auto 18.1, without the
     bound 29.9, spline 14.6; markers at 10 % auto 6.7 either way (spline 101.3). With the
-    spline carried by the partners left (the next test; session 56): auto 12.5, without the
+    spline carried by the partners left (the next test): auto 12.5, without the
     bound 15.4."""
     from mocap_gapfill.core import fill as fill_module
 
@@ -974,10 +974,10 @@ def test_auto_leans_on_the_takes_own_interpolator_where_nearly_all_of_the_body_i
     """135_02's first 1,800 complete frames (subject out of the KB) with bursts of 30 frames at
     120 fps, 50-100 % of the markers gone at once: where more than 90 % of them are gone over a
     gap, the few partners left stray further than their copies foretold, and the fill goes half
-    of the way on to the take's own interpolator (``AutoConfig.all_gone_share``; session 66).
+    of the way on to the take's own interpolator (``AutoConfig.all_gone_share``).
     Its gap accounts say so (the smooth track's share). Where few points are gone (the `markers`
     protocol at 10 %) nothing changes. Measured when written (mm; 01_01's bursts of 60 frames,
-    37.5 against 42.5); since session 67 leaves the models out of such gaps, 135_02's bursts of
+    37.5 against 42.5); with the models left out of such gaps, 135_02's bursts of
     30: auto 30.6, without it 31.8, spline 35.8 (01_01's of 60: 32.8 against 33.1)."""
 
     bursts, miss, accounts, few = _a_burst_rule(data_dir, monkeypatch, "135_02",
@@ -996,7 +996,7 @@ def test_auto_leaves_the_models_out_of_a_gap_where_most_of_the_body_is_gone(data
     120 fps, 50-100 % of the markers gone at once: the knowledge base's models see too little
     of the body there, and where more than half of the points are gone over a marker's gap it
     is filled as without a knowledge base (the rigid partners left, the spline, the take's own
-    interpolator; session 67). Its accounts give the models nothing there. Where few points are
+    interpolator). Its accounts give the models nothing there. Where few points are
     gone (the `markers` protocol at 10 %) nothing changes. Measured when written (mm): bursts
     auto 32.8, with the models 37.4, spline 58.9."""
     from mocap_gapfill.core import fill as fill_module
@@ -1036,8 +1036,8 @@ def test_auto_carries_the_spline_by_the_partners_left_where_most_of_the_body_is_
     copies. Where few points
     are gone (the `markers` protocol at 10 %) nothing changes. Measured when written (mm):
     bursts auto 44.5, without the carried spline 52.9, spline 58.9, pattern 65.3; markers at
-    10 % the same fill either way. Since session 67 (the models left out where most of the body
-    is gone): 32.8, without the carried spline 34.6."""
+    10 % the same fill either way. With the models left out where most of the body is gone:
+    32.8, without the carried spline 34.6."""
     take, kb = _cmu_first_frames(data_dir, "01_01", ("02_05", "135_02"))
     real = baselines.fill_spline_carried
     plain = (baselines, "fill_spline_carried",  # a carried spline that refilled no copy
@@ -1076,8 +1076,8 @@ def test_auto_doubts_a_short_gaps_fill_where_most_of_the_body_is_gone(data_dir, 
     the rigid partners') is weighed against the spline and a partner's pattern by its error on
     the point's copies, where more of the body was seen; in a burst it errs more, and its
     expected error is taken 4 times over (squared). Measured when written (mm): auto 0.60,
-    the copies taken at their word 0.67, spline 0.51, pattern 2.35; since session 67 (the
-    models left out where most of the body is gone) 0.48 against 0.50."""
+    the copies taken at their word 0.67, spline 0.51, pattern 2.35; with the models left out
+    where most of the body is gone 0.48 against 0.50."""
 
     take, kb = _cmu_first_frames(data_dir, "135_02", ("02_05", "01_01"))
     bursts = _auto_against(take, kb, "bursts", 3, monkeypatch, AutoConfig, "gone_doubt", 1.0)

@@ -7,9 +7,9 @@
    base of all Daz-friendly BVH motion (120 fps, the test take 13_30 left out): seconds and peak
    memory (max RSS of a fresh process for the stage).
 3. Markers: ``auto`` on the first 2,048 frames of CMU 135_02 (C3D, 41 markers, 30 % of them gone
-   per 60 frames) against the other CMU C3D takes, with the default marker settings (session 12: the
-   rigid estimate reaching past the gap ends, partners alone within 20 mm) and session 7's (from
-   the ends only, within 5 mm), in the same process.
+   per 60 frames) against the other CMU C3D takes, with the default marker settings (the
+   rigid estimate reaching past the gap ends, partners alone within 20 mm) and the rigid estimate from
+   the ends only, within 5 mm, in the same process.
 4. Smooth track: ``auto`` on the same frames with bursts of 30 frames (50-100 % of the markers
    gone at once, once per 120 frames) and with dropouts of 6 frames (5 % of the samples), its
    smooth track the spline alone (``AutoConfig.learned`` = 0) and half of the way
@@ -214,7 +214,7 @@ def main():
     markers = run_stage("markers", args.repeat)
     print(f"markers: auto on {markers['frames']} frames of 135_02, {markers['points']} markers, "
           f"30 % gone per 60 frames, KB {markers['kb_size']} poses")
-    for label, what in (("ends", "session 7 (rigid from the gap ends)"),
+    for label, what in (("ends", "rigid from the gap ends only"),
                         ("reach", "default (rigid past the ends)")):
         print(f"  {what:34s} median {markers[label + '_median_s']:6.2f} s, RMSE missing "
               f"{markers[label + '_rmse_missing_mm']:.1f} mm")

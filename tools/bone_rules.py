@@ -78,17 +78,17 @@ def evaluate(runs, **rule):
     return [np.mean(ratios[s]) for s in settings], worse, gaps
 
 
-#: session 10's first rule (short gaps at most 3/4 of the way) and the chosen one
+#: a rule that takes short gaps at most 3/4 of the way, and the chosen one
 PART_WAY = dict(short_shares=(0.25, 0.5, 0.75), short_promote=0.7, promote=0.9, long_gap=0.5)
 CHOSEN = dict(PART_WAY, short_shares=ALL, short_whole=0.3)
 RULES = {
-    "session 9 (share 1, promote 0.8, 1 s)": dict(shares=(1.0,)),
+    "all the way (share 1, promote 0.8, 1 s)": dict(shares=(1.0,)),
     "shares, promote 0.8": dict(shares=ALL),
     "short < 0.5 s: shares to 0.75, promote 0.7; long: all, 0.9": PART_WAY,
     "same, short gaps all the way below 0.3 (chosen)": CHOSEN,
     "same, long gaps left to interp take match where it strays > 1.5x its copies' error":
         dict(CHOSEN, trust=1.5),
-    "same, > 2x (session 11, not taken: no better on the test takes)": dict(CHOSEN, trust=2.0),
+    "same, > 2x (not taken: no better on the test takes)": dict(CHOSEN, trust=2.0),
     "same, > 3x": dict(CHOSEN, trust=3.0),
     "same, short gaps all the way below 0.4": dict(CHOSEN, short_whole=0.4),
     "same, short gaps all the way below 0.5": dict(CHOSEN, short_whole=0.5),

@@ -3,10 +3,10 @@ protocol's gaps on the tuning takes of ``tools/tune_bones.py`` (never a test tak
 out of a knowledge base that holds no test take), filled by ``auto``; per gap how it was filled
 (:class:`~mocap_gapfill.core.bonefill.GapChoice`), how far it moved the joints from Blender's
 interpolation, the interpolation's error on the gap's copies (the copies ``auto`` judges by), the
-joint speed at the gap's keys (and, session 59, at its copies' keys), and the error of the fill
+joint speed at the gap's keys (and at its copies' keys), and the error of the fill
 moved ``t`` = 0, 0.05, ..., 1 of the way from the interpolation's joints to its own (t = 1: the
 fill; linear in the joints), so that a veto or cap can be scored without filling again; and
-(session 41) how much calmer the bones about the gapped one move over the gap than over its
+ how much calmer the bones about the gapped one move over the gap than over its
 copies.
 
     python tools/lost_gaps.py OUT.jsonl            # run (the Daz tuning takes; AMC=1: ASF/AMC;
@@ -23,7 +23,7 @@ copies.
                                                    # the clip's ends)
     python tools/lost_gaps.py --score OUT.jsonl    # the vetoes of docs/DESIGN.md
     python tools/lost_gaps.py --tell OUT.jsonl     # how well each measure known at fill time
-                                                   # tells the lost gaps (session 51; a FILLS run)
+                                                   # tells the lost gaps (a FILLS run)
 """
 
 import json
@@ -206,7 +206,7 @@ def score(path):
 
     def held(scale, plus=0.0, longest=np.inf):
         """The departure held to ``scale`` x the copies' interpolation error + ``plus`` mm on
-        gaps of up to ``longest`` frames. Session 52: a departure d from the interpolation can
+        gaps of up to ``longest`` frames. A departure d from the interpolation can
         lose a gap (error > 1.1 e + 2 mm, e the interpolation's) only where d > 0.1 e + 2 mm
         (triangle inequality), so at 0.1 and 2 mm it loses none where the copies' error is no
         more than the gap's."""
@@ -223,7 +223,7 @@ def score(path):
                 for n in (60, 240)},
              **{f"calm gap, c = {c}": calm(c) for c in (0.5, 1, 2)},
              "calm gap, c = 2, estimate > 0.7": calm(2, narrow=True),
-             # session 41: the bones about the gap calmer than about its copies
+             # earlier: the bones about the gap calmer than about its copies
              "neighbours calmer, t = e^(calm + 0.5)": lambda r: 1.0 if r.get("calm_log") is None
              else min(1.0, np.exp(r["calm_log"] + 0.5))}
     for name, rule in rules.items():
@@ -279,7 +279,7 @@ def tell(path):
         / np.maximum([r["own_departure_mm"] for r in moved], 1e-3),
         "gap length": np.array([r["l"] for r in moved], float),
         "key speed / departure": np.array([r["key_speed_mm"] or 3.0 for r in moved]) / away,
-        "calm (session 41)": np.array([r["calm_log"] or 0.0 for r in moved]),
+        "calm": np.array([r["calm_log"] or 0.0 for r in moved]),
         **{f"{name}'s distance from the fill / departure":
            np.array([r["fills_mm"][name][1] for r in moved]) / away
            for name in moved[0]["fills_mm"]},

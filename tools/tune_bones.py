@@ -16,7 +16,7 @@ candidates, blends of ``interp`` and ``hermite`` towards ``match`` are saved too
 The last: the CMU ASF/AMC takes that are not test takes (07_05, 09_06 and four of the
 unverified ones), against a KB of cmu/asfamc without the test takes (a second skeleton).
 
-(session 9: 01_08, 02_05, 03_02, 05_10, 06_03, 07_05, 08_02, 09_05, 10_03, 11_01, 12_03, 13_10
+(01_08, 02_05, 03_02, 05_10, 06_03, 07_05, 08_02, 09_05, 10_03, 11_01, 12_03, 13_10
 with the candidates interp hermite match.)
 """
 

@@ -3,7 +3,7 @@ take-settings at l >= 60 frames (seed 0) where no copy of any gap fits the take 
 empty), on every Daz take that is not a test take, or with
 ``AMC=1`` on the ASF/AMC tuning takes; each subject out of a knowledge base that holds no test
 take (60 poses a second). ``auto`` filled with ``BoneConfig.unjudged_consensus`` set to SHARE
-(0: ``match`` unjudged, as before session 47; 1: the mean of ``match`` and ``regress_kernel``;
+(0: ``match`` unjudged, as before; 1: the mean of ``match`` and ``regress_kernel``;
 2: ``regress_kernel``); per take-setting the RMSE of ``auto`` and ``interp`` per gap.
 
     python tools/unjudged_gaps.py OUT.jsonl SHARE     # AMC=1: the ASF/AMC tuning takes

@@ -417,13 +417,13 @@ def test_bvh_armature_fill_beats_blender_interpolation(daz_armature, daz_kb, dat
     for gap, fill_mm, interp_mm in errors:
         print(f"{gap.point} {gap.first}-{gap.last}: default fill {fill_mm:.1f} mm, Blender's "
               f"interpolation {interp_mm:.1f} mm")
-        # measured 120.5 / 61.9 / 6.9 vs 130.0 / 83.8 / 7.4 (since session 64 the chest's kept
-        # interpolation goes a fifth of the way on to learn: 7.4 before; since session 50 it
+        # measured 120.5 / 61.9 / 6.9 vs 130.0 / 83.8 / 7.4 (the chest's kept
+        # interpolation goes a fifth of the way on to learn: 7.4 before; now it
         # keeps its interpolation, its fill moving it less than the copies' error: 6.7 before;
         # 125.6 / 76.1 before the long-gap consensus and the scene's 120.000048 fps read as
-        # 120; session 8: the shin gap came out worse, 94.3); issue 14's bar per gap
+        # 120; earlier: the shin gap came out worse, 94.3); issue 14's bar per gap
         assert fill_mm <= 1.1 * interp_mm + 2.0
-    # over the three gaps together: measured 12 % better (RMSE; session 34: 5 %, session 8: 2.7 %)
+    # over the three gaps together: measured 12 % better (RMSE; earlier: 5 %, earlier: 2.7 %)
     assert total_mm(errors, 1) < total_mm(errors, 2)
     # joints no gap reaches did not move
     missing = bridge.missing_points(broken, bone_gaps)
