@@ -379,9 +379,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg
     # marker sets let partners carry a marker alone within more
     alone = cfg.rigid_first_markers if motion.parents is None else cfg.rigid_first
     partners = _Partners(motion, should_cancel, cfg)
-    carried, placed, stop, stopped = (partners.carried, partners.placed, partners.stop,
-                                      partners.stopped)
-    rigid, spread = carried(motion)
+    rigid, spread = partners.carried(motion)
     # the copies are refilled as the gaps will be: where rigid partners carry a point closely
     # through a gap, the knowledge base sees it there (below), so it is seen at the copies too
     hidden = motion.replace(positions=np.where(
@@ -390,8 +388,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg
                  motion.positions)))
     markers = motion.parents is None and probe.any()
     (knn_copies, (on_copies, copies_spread), (placed_copies, placed_gaps), matched, regressed,
-     patterned) = _copies_refilled(hidden, motion, kb, probe, long, markers, carried, placed,
-                                   donors, settings, progress, should_cancel, stop, stopped, cfg)
+     patterned) = _copies_refilled(hidden, motion, kb, probe, long, markers, partners, donors,
+                                   settings, progress, should_cancel, cfg)
     per_sample = np.full(motion.n_points, np.nan)  # the fill's squared error on its copies
     eased = {}  # gaps blended with a spline (and pattern): their shares and the error expected
 
@@ -427,7 +425,8 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg
                                  patterned, by_partner)
         copies = _blend(knn_copies, on_copies, weight)
         out, eased, per_sample = _with_smooth_track(motion, out, probe, copies, weight, shares,
-                                                    harder, carried, on_copies_of, trace, cfg)
+                                                    harder, partners.carried, on_copies_of,
+                                                    trace, cfg)
     out, all_gone = _with_all_gone_learnt(motion, out, trace, cfg)
     out, holes = _with_holes_splined(motion, out, trace, cfg)
     eased.update({(p, a): (1.0, 0.0, float("nan")) for p, a in holes})
@@ -475,16 +474,16 @@ class _Partners:
             only, round(self.cfg.place_ends_seconds * self.motion.fps))
 
 
-def _copies_refilled(hidden, motion, kb, probe, long, markers, carried, placed, donors, settings,
-                     progress, should_cancel, stop, stopped, cfg):
+def _copies_refilled(hidden, motion, kb, probe, long, markers, partners, donors, settings,
+                     progress, should_cancel, cfg):
     """The copies (``probe``, hidden in ``hidden``) refilled by each estimate: the knowledge
     base's models in one cheaper pass (its only use is to weigh the methods; ``copies_*``),
     and beside it, in a thread (numpy lets go of the interpreter in its products; the results
-    are the same as one after the other), the rigid partners (``carried``), on a marker set the
-    place among them (``placed``, of the gaps too), and on ``long`` gaps the windows of motion,
-    the take's own regression and a partner's pattern. ``stop`` is set where the fill ends
-    early, so that the estimates beside it stop too (``stopped``). Returns ``(knn, (rigid,
-    spread), (placed_copies, placed_gaps), windows, regressed, pattern)``."""
+    are the same as one after the other), the rigid partners (:class:`_Partners`), on a marker
+    set the place among them (of the gaps too), and on ``long`` gaps the windows of motion, the
+    take's own regression and a partner's pattern; where the fill ends early, the estimates
+    beside it stop too. Returns ``(knn, (rigid, spread), (placed_copies, placed_gaps), windows,
+    regressed, pattern)``."""
     from concurrent.futures import ThreadPoolExecutor
     from dataclasses import replace
 
@@ -493,10 +492,12 @@ def _copies_refilled(hidden, motion, kb, probe, long, markers, carried, placed, 
     from .regression import regress_points
 
     with ThreadPoolExecutor(max_workers=1) as pool:
+        carried, placed = partners.carried, partners.placed
         estimates = pool.submit(lambda: (carried(hidden) if probe.any() else (None, None),
                                          (placed(hidden, probe), placed(motion)) if markers
                                          else (None, None),
-                                         fill_match(hidden, kb, long, stopped).positions
+                                         fill_match(hidden, kb, long,
+                                                    partners.stopped).positions
                                          if long.any() and kb is not None else None,
                                          regress_points(hidden.positions, motion.names,
                                                         probe & long[None])
@@ -516,7 +517,7 @@ def _copies_refilled(hidden, motion, kb, probe, long, markers, carried, placed, 
                           fill_knn(hidden, kb, scout, progress=lambda f, m: progress(0.5 * f, m),
                                    should_cancel=should_cancel).positions)
         except BaseException:
-            stop.set()  # cancelled or failed: the estimates stop at their next gap
+            partners.stop.set()  # cancelled or failed: the estimates stop at their next gap
             raise
         return (knn_copies, *estimates.result())
 
