@@ -341,7 +341,7 @@ def describe(gap, armature):
     if not armature:  # "from knowledge base 60%", "rigid partners 40%", the expected error
         first, *rest = gap.how.split(", ")
         return [f"from {first}", *rest] + (
-            [f"expected error ~{gap.expected_mm:.0f} mm"] if gap.expected_mm else [])
+            [explain.expected(gap.expected_mm / 1000)] if gap.expected_mm else [])
     if gap.how == explain.KEPT:
         return [explain.KEPT, "(no fill was sure to beat it here)" if gap.estimate else
                 "(no fill was judged better here)"]

@@ -63,8 +63,8 @@ def expected(estimate):
 
 def bone_gap(choices):
     """How a bone's gap(s) went from Blender's curve (:class:`~.bonefill.GapChoice`), in words:
-    :data:`KEPT` where no fill moved it, else ``"knowledge-base motion, blended with the rest of
-    the body"`` (the fill it took, then what it was blended with)."""
+    :data:`KEPT` where no fill moved it, else ``"knowledge-base motion, blended with the other
+    bones"`` (the fill it took, then what it was blended with)."""
     return "; ".join(dict.fromkeys(_bone_words(c) for c in choices))
 
 
