@@ -63,6 +63,13 @@ def parse_bvh(path):
     if motion_line is None:
         raise ParseError("no MOTION section (file truncated or not a BVH)", path)
 
+    joints, n_channels = _parse_hierarchy(tokens, path, motion_line)
+    frame_time, values = _parse_motion(lines, motion_line, n_channels, path)
+    return BvhFile(str(path), joints, frame_time, values)
+
+
+def _parse_hierarchy(tokens, path, motion_line):
+    """The joints of a BVH HIERARCHY from its ``(token, line)`` pairs, and the channel count."""
     pos = 0
 
     def take(expect=None):
@@ -144,8 +151,11 @@ def parse_bvh(path):
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise ParseError(f"duplicated joint names: {', '.join(dup)}", path)
+    return joints, n_channels
 
-    # ---- MOTION --------------------------------------------------------------------------------
+
+def _parse_motion(lines, motion_line, n_channels, path):
+    """The frame time and the channel values of a BVH MOTION section (``lines`` of the file)."""
     header = lines[motion_line:motion_line + 2]
     if len(header) < 2:
         raise ParseError("MOTION section is truncated", path, motion_line)
@@ -175,7 +185,7 @@ def parse_bvh(path):
     if not np.isfinite(values).all():
         bad = int(np.argwhere(~np.isfinite(values))[0, 0])
         raise ParseError("non-finite value in motion data", path, data_lines[bad][0])
-    return BvhFile(str(path), joints, frame_time, values)
+    return frame_time, values
 
 
 def _header_value(line, key, path, number):

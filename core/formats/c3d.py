@@ -86,43 +86,10 @@ def _float(raw, processor):
     return struct.unpack(">f" if processor == 86 else "<f", raw)[0]
 
 
-def precheck(path):
-    """Check a C3D file's structure without native code; raise :class:`ParseError` if unsafe.
-
-    Checks the signature, the processor type, that every parameter record lies inside the
-    parameter section and moves forward, that dimensions and types are valid, and that the file
-    is long enough for the point and analog data the header and parameters announce.
-
-    Returns
-    -------
-    dict
-        ``points``, ``frames``, ``rate`` as announced (for messages and tests).
-    """
-    try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        raise ParseError(f"cannot read file ({exc.strerror})", path) from None
-    size = len(data)
-    if size == 0:
-        raise ParseError("empty file", path)
-    if size < 1024:
-        raise ParseError(f"only {size} bytes: too short for a C3D file (truncated?)", path)
-    if data[1] != 0x50:
-        raise ParseError("not a C3D file (no C3D signature in the header)", path)
-    pblock = data[0]
-    if pblock < 2:
-        raise ParseError(f"bad parameter block pointer {pblock}", path)
-    pstart = (pblock - 1) * 512
-    if pstart + 4 > size:
-        raise ParseError("parameter section lies beyond the end of the file (truncated?)", path)
-    processor = data[pstart + 3]
-    if processor not in (84, 85, 86):
-        raise ParseError(f"unknown processor type {processor} in the parameter section", path)
-    endian = ">" if processor == 86 else "<"
-    pend = min(size, pstart + max(1, data[pstart + 2]) * 512)
-    i16 = struct.Struct(endian + "h")
-    u16 = struct.Struct(endian + "H")
-
+def _parameter_records(data, pstart, pend, i16, path):
+    """The groups (``{id: name}``) and parameters (``{(group id, name): (type, dims, raw)}``)
+    of a C3D parameter section (bytes ``pstart``-``pend`` of ``data``), every record checked
+    to lie inside the section and to point forward."""
     groups, params = {}, {}
     pos = pstart + 4
     while pos + 2 <= pend:
@@ -163,6 +130,47 @@ def precheck(path):
         if nxt <= pos or nxt > pend:
             raise ParseError("parameter records point backwards or outside the section", path)
         pos = nxt
+    return groups, params
+
+
+def precheck(path):
+    """Check a C3D file's structure without native code; raise :class:`ParseError` if unsafe.
+
+    Checks the signature, the processor type, that every parameter record lies inside the
+    parameter section and moves forward, that dimensions and types are valid, and that the file
+    is long enough for the point and analog data the header and parameters announce.
+
+    Returns
+    -------
+    dict
+        ``points``, ``frames``, ``rate`` as announced (for messages and tests).
+    """
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise ParseError(f"cannot read file ({exc.strerror})", path) from None
+    size = len(data)
+    if size == 0:
+        raise ParseError("empty file", path)
+    if size < 1024:
+        raise ParseError(f"only {size} bytes: too short for a C3D file (truncated?)", path)
+    if data[1] != 0x50:
+        raise ParseError("not a C3D file (no C3D signature in the header)", path)
+    pblock = data[0]
+    if pblock < 2:
+        raise ParseError(f"bad parameter block pointer {pblock}", path)
+    pstart = (pblock - 1) * 512
+    if pstart + 4 > size:
+        raise ParseError("parameter section lies beyond the end of the file (truncated?)", path)
+    processor = data[pstart + 3]
+    if processor not in (84, 85, 86):
+        raise ParseError(f"unknown processor type {processor} in the parameter section", path)
+    endian = ">" if processor == 86 else "<"
+    pend = min(size, pstart + max(1, data[pstart + 2]) * 512)
+    i16 = struct.Struct(endian + "h")
+    u16 = struct.Struct(endian + "H")
+
+    groups, params = _parameter_records(data, pstart, pend, i16, path)
 
     def param_int(group, name):
         for (gid, pname), (dtype, dims, raw) in params.items():
