@@ -46,10 +46,9 @@ def add_arguments(parser, with_input=False):
 def cmd_demo(args):
     """The core demo (numbers, KBs, plot), then the Blender scenes when bpy is installed; a
     short summary, every step with ``--verbose``."""
-    from ..core.cli import _quiet
-    from ..core.demo import run_demo, summary
+    from ..core.demo import quiet, run_demo, summary
 
-    report = print if args.verbose else _quiet
+    report = print if args.verbose else quiet
     demo = run_demo(args.outdir, report=report)
     try:
         import bpy  # noqa: F401

@@ -311,15 +311,11 @@ def _data_path(path):
 
 
 def cmd_demo(args):
-    from .demo import run_demo, summary
+    from .demo import quiet, run_demo, summary
 
-    demo = run_demo(args.outdir, report=print if args.verbose else _quiet)
+    demo = run_demo(args.outdir, report=print if args.verbose else quiet)
     print("\n".join(summary(demo, args.outdir)))
     return 0
-
-
-def _quiet(message):
-    """A report that says nothing (the short output of ``demo`` without ``--verbose``)."""
 
 
 def cmd_bench(args):

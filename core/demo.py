@@ -198,6 +198,10 @@ def _real_armature(scores, report):
            f"curves through Bezier keys {scores[(REAL_ARMATURE, 'bezier')]:.1f} mm)")
 
 
+def quiet(message):
+    """A report that says nothing: the demo's steps without ``--verbose``."""
+
+
 def summary(demo, outdir, scenes=False):
     """The demo's result in a few lines: per take what was removed and the fill against what the
     user would otherwise have (Blender's interpolation, the studios' rigid-body fill), then the
