@@ -40,8 +40,9 @@ TAKE_SUFFIXES = (".c3d", ".bvh", ".bvh.gz", ".amc", ".blend")
 ENGINES = ("local", "ray", "dask")
 FORMATS = ("same", "c3d", "npz", "csv")
 MANIFEST = "manifest.jsonl"
-REPORT_FIELDS = ("input", "output", "status", "gaps", "samples_filled", "longest_gap",
-                 "expected_mm", "review_first", "method", "seconds", "peak_mb", "error")
+REPORT_FIELDS = ("input", "output", "status", "repaired", "gaps", "samples_filled",
+                 "longest_gap", "expected_mm", "review_first", "method", "seconds", "peak_mb",
+                 "error")
 
 
 @dataclass
@@ -53,9 +54,11 @@ class Options:
     max_gap: int = 0
     k: int = None
     device: str = "auto"
+    repair: bool = True  # label swaps, spikes and ghosts repaired before the fill
 
     def key(self):
-        return {"method": self.method, "max_gap": self.max_gap, "k": self.k}
+        return {"method": self.method, "max_gap": self.max_gap, "k": self.k,
+                "repair": self.repair}
 
 
 def find_takes(inputs):
@@ -123,7 +126,7 @@ def run_take(task):
     """Fill one take (in a worker): ``task`` = (input, output, options); returns its report row.
     Any error of the take becomes the row's one-line ``error``."""
     source, output, options = task
-    row = {"input": source, "output": output, "status": "filled", "gaps": 0,
+    row = {"input": source, "output": output, "status": "filled", "repaired": "", "gaps": 0,
            "samples_filled": 0, "longest_gap": 0, "method": options.method, "seconds": 0.0,
            "peak_mb": "", "error": ""}
     start = time.perf_counter()
@@ -160,6 +163,11 @@ def _motion_take(source, output, options):
     from .models import KnnSettings
 
     motion = read_motion(source)
+    found = []
+    if options.repair:
+        from .faults import repaired
+
+        motion, found = repaired(motion)
     runs = motion.gap_runs()
     kb = _knowledge_base(options.kb, motion.names, options.method)
     out, accounts = fill(motion, options.method, kb=kb,
@@ -167,7 +175,8 @@ def _motion_take(source, output, options):
                          max_gap=options.max_gap or None, return_account=True)
     write_motion(out, output, overwrite=True)
     worst = worst_first(accounts or [])[:REVIEW_FIRST]
-    return {"gaps": len(runs), "longest_gap": max((b - a + 1 for _, a, b in runs), default=0),
+    return {"repaired": "; ".join(f.summary() for f in found), "gaps": len(runs),
+            "longest_gap": max((b - a + 1 for _, a, b in runs), default=0),
             "samples_filled": int((motion.missing & ~out.missing).sum()),
             "expected_mm": round(1000 * worst[0].estimate, 1) if worst else "",
             "review_first": "; ".join(a.summary() for a in worst)}

@@ -58,7 +58,8 @@ def _format_summary(s):
         s["path"],
         f"  format   {s['format']} ({s['kind']}, {s['limbs']} limbs)",
         f"  frames   {s['frames']} at {s['fps']:g} fps ({s['seconds']:.2f} s)",
-        f"  points   {s['points']}",
+        f"  points   {s['points']}" + (f" ({s['performers']} performers, split by name "
+                                        "prefix when filled)" if s["performers"] > 1 else ""),
         f"  units    {s['units']}, {s['up_axis'].upper()} up in the file "
         "(read as metres, Z up)",
         f"  missing  {gaps}",
@@ -160,6 +161,8 @@ def cmd_fill(args):
             raise GapFillError(f"--gap-report {args.gap_report}: name a .csv or .json file")
         _check_output(Path(args.gap_report), args.force, src)
     motion = _read(src, args)
+    if not args.no_repair:
+        motion = _repaired(motion)
     kb, note = kb_for_take(motion.names, args.method, load_kb(args.kb) if args.kb else None,
                            choose="-k KB.npz; make one with 'mocap-gapfill kb build'")
     if note:
@@ -185,6 +188,47 @@ def cmd_fill(args):
         _write_gap_report(accounts, Path(args.gap_report))
         print(f"wrote {args.gap_report}: {len(accounts)} gaps, worst first")
     return 0
+
+
+def _repaired(motion):
+    """The take with its label swaps, spikes and ghosts repaired (:mod:`.faults`), each said."""
+    from .faults import repaired, said
+
+    motion, found = repaired(motion)
+    if found:
+        print(f"repaired {len(found)} problem{'s' * (len(found) > 1)} before filling "
+              "(--no-repair keeps them):")
+        for fault in found:
+            print(f"  {said(fault)}")
+    return motion
+
+
+def cmd_check(args):
+    """``check``: the label swaps, spikes and ghosts of marker files, listed (and as JSON)."""
+    from .faults import find_faults, said
+
+    events, failed = {}, 0
+    for path in args.files:
+        try:
+            motion = _read(path, args)
+        except GapFillError as exc:
+            failed += 1
+            print(f"error: {exc}", file=sys.stderr)
+            continue
+        found = find_faults(motion).faults
+        events[str(path)] = [f.as_dict(offset=args.skip_frames) for f in found]
+        note = " (a skeleton: labels are checked on marker sets)" if motion.parents else ""
+        print(f"{path}: {len(found) or 'no'} problem{'s' * (len(found) != 1)} found{note}")
+        for fault in found:
+            print(f"  {said(fault).split(':')[0]}")
+    if args.json:
+        payload = (next(iter(events.values())) if len(args.files) == 1 and events else None)
+        with atomic_output(Path(args.json), overwrite=True) as tmp:
+            tmp.write_text(json.dumps({"events": payload} if payload is not None
+                                      else {"files": {k: {"events": v}
+                                                      for k, v in events.items()}}, indent=1))
+        print(f"wrote {args.json}")
+    return 1 if failed else 0
 
 
 #: the columns of ``fill --gap-report``: the gap, the copies' RMS error, what filled it in words
@@ -220,7 +264,8 @@ def cmd_batch(args):
     if args.kb and not Path(args.kb).is_file():
         raise GapFillError(f"no such knowledge-base file: {args.kb}")
     options = Options(kb=str(Path(args.kb).resolve()) if args.kb else None, method=args.method,
-                      max_gap=args.max_gap or 0, k=args.k, device=args.device)
+                      max_gap=args.max_gap or 0, k=args.k, device=args.device,
+                      repair=not args.no_repair)
     progress = ProgressLine(args.quiet)
     rows = []
     try:
@@ -254,6 +299,8 @@ def cmd_evaluate(args):
         raise GapFillError("give the knowledge base: --kb-sources PATH... or --kb KB.npz (or "
                            "--no-kb: auto from the take alone)" + (", one of them" if given else ""))
     progress = Progress(args.quiet)
+    if args.protocol == "faults":
+        return _evaluate_faults(args, progress)
     if args.protocol in ("bones", "bone-ends"):
         from .bonefill import BONE_BASELINES, BONE_METHODS
         from .evaluate import evaluate_bones
@@ -293,6 +340,28 @@ def cmd_evaluate(args):
                    "kb_sources": [_data_path(s) for s in args.kb_sources or [args.kb] if s],
                    "results": results}
         Path(args.json).write_text(json.dumps(payload, indent=1))
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _evaluate_faults(args, progress):
+    """``evaluate --protocol faults``: swaps, spikes and ghosts injected, found and repaired."""
+    from .evaluate import _full_kb
+    from .faulteval import evaluate_faults, fault_table
+
+    kb = _full_kb(args.kb_sources, args.kb, args.fps, args.skip_frames, args.exclude_kb or (),
+                  _report)
+    results = evaluate_faults(args.test, kb, fps=args.fps, seed=args.seed, progress=progress,
+                              report=None if args.quiet else _report)
+    progress.done()
+    print(fault_table(results))
+    if args.json:
+        payload = {"protocol": "faults", "fps": args.fps, "seed": args.seed,
+                   "tests": [_data_path(t) for t in args.test],
+                   "kb_sources": [_data_path(s) for s in args.kb_sources or [args.kb] if s],
+                   "results": results}
+        with atomic_output(Path(args.json), overwrite=True) as tmp:
+            tmp.write_text(json.dumps(payload, indent=1))
         print(f"wrote {args.json}")
     return 0
 
@@ -339,6 +408,14 @@ def build_parser(extra=None):
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
     _add_read_options(p)
     p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("check", help="list the label swaps, spikes and ghosts of marker files "
+                                     "(fill and batch repair them first)")
+    p.add_argument("files", nargs="+", metavar="FILE", help=f"{', '.join(READ_FORMATS)}")
+    p.add_argument("--json", metavar="OUT", help="write the events as JSON (frames from 0 at "
+                                                 "the file's first frame)")
+    _add_read_options(p)
+    p.set_defaults(func=cmd_check)
 
     p = sub.add_parser("convert", help="convert a motion file to C3D, NPZ or CSV")
     p.add_argument("input", help=f"{', '.join(READ_FORMATS)}")
@@ -410,6 +487,8 @@ def _add_fill_commands(sub):
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.add_argument("--verbose", "-v", action="store_true",
                    help="also say what each stage of auto did")
+    p.add_argument("--no-repair", action="store_true",
+                   help="fill as the take is: leave label swaps, spikes and ghosts in place")
     _add_read_options(p)
     p.set_defaults(func=cmd_fill)
 
@@ -436,6 +515,8 @@ def _add_fill_commands(sub):
                         ".blend files stay .blend)")
     p.add_argument("-K", dest="k", type=int, help="neighbours per frame (knn)")
     p.add_argument("--device", default="auto", choices=DEVICES)
+    p.add_argument("--no-repair", action="store_true",
+                   help="fill the takes as they are: leave label swaps, spikes and ghosts")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_batch)
 
@@ -445,7 +526,7 @@ def _add_evaluate(sub):
     p = sub.add_parser("evaluate", help="accuracy of the methods on punched gaps in real data")
     p.add_argument("--protocol", required=True,
                    choices=["joints", "markers", "bodyparts", "shortgaps", "endgaps", "realgaps",
-                            "bursts", "bones", "bone-ends"],
+                            "bursts", "bones", "bone-ends", "faults"],
                    help="shortgaps: dropouts of 3-24 frames; endgaps: points missing for "
                         "the first or last 3-120 frames; bursts: 50-100 %% of the points "
                         "gone together for 3-60 frames per 120; "
@@ -453,7 +534,8 @@ def _add_evaluate(sub):
                         "bones: rotation gaps on armatures (BVH, ASF/AMC) at the take's own "
                         "rate; methods auto, knn, match, regress, learn, interp, bezier, hermite, "
                         "slerp, positions; bone-ends: the same, bones keyless for the first or "
-                        "last 15-240 frames")
+                        "last 15-240 frames; faults: label swaps, spikes and ghosts injected "
+                        "into marker takes, found, repaired and filled")
     p.add_argument("--test", nargs="+", required=True, metavar="FILE", help="clean test takes")
     p.add_argument("--kb-sources", nargs="+", default=[], metavar="PATH",
                    help="knowledge-base files/folders (the test subject is left out)")

@@ -1,7 +1,7 @@
 """One entry point for every gap-filling method: :func:`fill`."""
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -9,6 +9,7 @@ from . import baselines
 from .errors import GapFillError
 from .kb import match_names, starter_kb
 from .motion import gap_runs
+from .performers import bare, names_for_kb, performers
 
 METHODS = ("knn", "auto", "linear", "spline", "local-spline", "rigid", "pattern", "svt", "pca",
            "intercorrelation")
@@ -230,7 +231,7 @@ def kb_for_take(names, method, kb=None, alone=TAKE_ALONE, choose="-k KB.npz"):
     if kb is not None or method not in USES_KB:
         return kb, None
     try:
-        path, kb = starter_kb(list(names))
+        path, kb = starter_kb(names_for_kb(names))
     except GapFillError as exc:
         if method in NEEDS_KB:
             raise GapFillError(f"method {method!r} needs a knowledge base ({choose}); {exc}; "
@@ -279,6 +280,10 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
                            "one, 'auto' fills from the take alone")
     if not motion.missing.any():
         return (motion, [] if method == "auto" else None) if return_account else motion
+    groups = performers(motion.names) if motion.parents is None else {}
+    if groups:
+        return _fill_performers(motion, groups, method, kb, settings, progress, should_cancel,
+                                report, max_gap, return_account, trace, config)
     accounts = None
     if method == "auto":
         out, accounts = _fill_auto(motion, kb, settings, progress, should_cancel, report,
@@ -296,6 +301,41 @@ def fill(motion, method=DEFAULT_METHOD, kb=None, settings=None, progress=None, s
         accounts = [a for a in accounts
                     if not out.missing[a.first:a.last + 1, index[a.point]].all()]
     return (out, accounts) if return_account else out
+
+
+def _fill_performers(motion, groups, method, kb, settings, progress, should_cancel, report,
+                     max_gap, return_account, trace, config):
+    """:func:`fill` of a take of several performers (:func:`~.performers.performers`): each
+    on its own, by the names without its prefix; a performer the knowledge base does not fit
+    fills from its take alone (``auto``) or is left as it is (the methods that need one)."""
+    positions, filled = motion.positions.copy(), np.zeros(motion.missing.shape, bool)
+    accounts = []
+    for n, (prefix, members) in enumerate(groups.items()):
+        names = [motion.names[i] for i in members]
+        part = motion.select(names)
+        part = part.replace(names=tuple(bare(name) for name in names))
+        said = (lambda m, who=prefix or "unnamed points": report(f"{who}: {m}")) if report else None
+        fits = kb
+        if kb is not None:
+            try:
+                match_names(kb, part.names)
+            except GapFillError as exc:
+                fits = None
+                if method in NEEDS_KB:
+                    if said:
+                        said(f"left unfilled: {exc}")
+                    continue
+        step = (lambda f, m, n=n: progress((n + f) / len(groups), m)) if progress else None
+        out, mine = fill(part, method, kb=fits, settings=settings, progress=step, should_cancel=should_cancel,
+                         report=said, max_gap=max_gap, return_account=True, trace=trace,
+                         config=config)
+        positions[:, members] = out.positions
+        filled[:, members] = out.filled if out.filled is not None else False
+        accounts += [replace(a, point=names[part.names.index(a.point)]) for a in mine or []]
+    out = motion.replace(positions=positions, filled=filled)
+    if not return_account:
+        return out
+    return out, (accounts if method == "auto" else None)
 
 
 def _fill(motion, method, kb, settings, progress, should_cancel, report):

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import GapFillError
+from .performers import performers
 
 #: metres per source unit, for the unit names readers report
 UNIT_SCALES = {
@@ -209,6 +210,8 @@ class Motion:
             "longest_gap_frames": 0 if longest is None else longest[2] - longest[1] + 1,
             "longest_gap_point": None if longest is None else self.names[longest[0]],
             "limbs": int(len(self.limbs)),
+            "performers": (len([p for p in performers(self.names) if p]) or 1
+                           if self.parents is None else 1),
         }
 
 

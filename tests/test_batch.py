@@ -81,8 +81,13 @@ def _blend_take(bvh, path):
 
 
 def _same_as_fill(source, output, options, kb=None):
-    """The batch's output reads back exactly as the single-file fill's does."""
+    """The batch's output reads back exactly as the single-file fill's does (label problems
+    repaired first, as ``fill`` does)."""
+    from mocap_gapfill.core.faults import repaired
+
     motion = read_motion(source)
+    if options.repair:
+        motion = repaired(motion)[0]
     single = output.with_name("single_" + output.name)
     write_motion(fill(motion, options.method, kb=kb), single, overwrite=True)
     a, b = read_motion(output).positions, read_motion(single).positions

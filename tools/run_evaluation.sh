@@ -38,6 +38,12 @@ $MG evaluate --protocol shortgaps --quiet --skip-frames 6 --kb-sources "$DAZ" \
   --methods auto knn rigid pattern local-spline spline linear \
   --test "${BVH43[@]}" \
   --json docs/results/shortgaps_bvh43.json
+# label swaps, spikes and ghosts injected into the marker test takes, found, repaired and filled
+# (thresholds fitted on the tuning takes: tools/fit_faults.py)
+$MG evaluate --protocol faults --quiet --fps 120 --kb-sources "$D/cmu/c3d" \
+  --test "$D/cmu/c3d/85_02.c3d" --json docs/results/faults_cmu_kb.json
+$MG evaluate --protocol faults --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
+  --test "${HDM05[@]}" --json docs/results/faults_hdm05_subjects.json
 # HDM05-derived numbers (CC BY-SA 3.0 data in the knowledge base)
 $MG evaluate --protocol markers --quiet --fps 120 --kb-sources "$D/hdm05/c3d" \
   --test "$D/cmu/c3d/85_02.c3d" --json docs/results/markers_hdm05_kb.json
