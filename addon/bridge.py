@@ -84,15 +84,18 @@ def _rewrite(curve, frames, values, types, modes):
     curve.update()
 
 
-def revert_keys(owner, point, first, last):
-    """Take the filled keys (typed GENERATED) of ``point`` (a bone of an armature, a marker of a
-    marker set) on frames ``first``-``last`` out of its recovered action: the keys either side
-    show there again as the original shows them; the recovered actions play afterwards.
-    Returns how many keys went."""
+def revert_keys(owner, point, first, last, every=False):
+    """Take the filled keys (typed GENERATED; ``every``: all keys, a marker's cut for the fill)
+    of ``point`` (a bone of an armature, a marker of a marker set) on frames ``first``-``last``
+    out of its recovered action: the keys either side show there again as the original shows
+    them; the recovered actions play afterwards. Returns how many keys went."""
     if is_marker_set(owner):
         target, prefix = bpy.data.objects.get(point), "location"
     else:
         target, prefix = owner, f'pose.bones["{bpy.utils.escape_identifier(point)}"].'
+    if target is not None and every:
+        original_action(target)
+        recovered_action(target)
     if target is None or target.mocap_gapfill.recovered_action is None:
         return 0
     show(owner, "RECOVERED")
@@ -101,7 +104,7 @@ def revert_keys(owner, point, first, last):
         if not curve.data_path.startswith(prefix):
             continue
         frames, values, types, modes = _keys(curve)
-        drop = ((types == compat.KEY_TYPES["GENERATED"]) & (np.round(frames) >= first)
+        drop = (((types == compat.KEY_TYPES["GENERATED"]) | every) & (np.round(frames) >= first)
                 & (np.round(frames) <= last))
         if drop.any():
             _rewrite(curve, frames[~drop], values[~drop], types[~drop], modes[~drop])

@@ -14,6 +14,7 @@ from ..core import explain
 from ..core.errors import GapFillError
 from ..core.fill import DEFAULT_METHOD
 from ..core.motion import gap_runs
+from ..core.faults import find_faults
 from ..core.suspect import find_suspects
 from . import bridge, prefs
 
@@ -62,12 +63,19 @@ def detect(owner, scene, suspects=True, jump_factor=8.0):
     take = read_original(owner, scene)
     missing = bridge.unkeyed(take)
     suspect = np.zeros_like(missing)
+    problems = []
     if suspects:
         motion = take.motion(bridge.missing_points(take, missing))
         flagged = find_suspects(motion.positions, motion.fps, motion.limbs,
                                 jump_factor=jump_factor)
         if take.kind == "armature":
             flagged = bridge.blame_bones(take, flagged)
+        else:  # label swaps, spikes and ghosts: listed as such, not as suspects
+            problems = find_faults(motion).faults
+            for fault in problems:  # (the jump test flags a jump's neighbours too)
+                for name in fault.points:
+                    flagged[max(fault.first - 1, 0):fault.last + 2,
+                            motion.names.index(name)] = False
         suspect = flagged & ~missing
     settings = owner.mocap_gapfill
     marked = [(g.point, g.first, g.last, g.kind, g.filled, g.how, g.estimate, g.expected_mm)
@@ -76,6 +84,11 @@ def detect(owner, scene, suspects=True, jump_factor=8.0):
     for kind, mask in (("MISSING", missing), ("SUSPECT", suspect)):
         for j, a, b in gap_runs(mask):
             _add_gap(settings, take.points[j], take.first + a, take.first + b, kind)
+    for fault in problems:  # by the listed names (objects), not the labels
+        names = [take.points[take.names.index(n)] for n in fault.points]
+        gap = _add_gap(settings, names[0], take.first + fault.first, take.first + fault.last,
+                       fault.kind.upper())
+        gap.other = names[1] if len(names) > 1 else ""
     for point, first, last, kind, filled, how, estimate, expected in marked:
         gap = _add_gap(settings, point, first, last, kind)
         gap.filled, gap.how, gap.estimate, gap.expected_mm = filled, how, estimate, expected
@@ -118,12 +131,13 @@ def update_stats(owner, points, first, frames):
 
 
 def gap_mask(gaps, points, first, frames):
-    """(frames, points) mask of the listed gaps inside the take's range."""
+    """(frames, points) mask of the listed gaps inside the take's range (a swap is not a gap:
+    Repair exchanges its keys back)."""
     index = {n: j for j, n in enumerate(points)}
     mask = np.zeros((frames, len(points)), dtype=bool)
     for gap in gaps:
         j = index.get(gap.point)
-        if j is None:
+        if j is None or gap.kind == "SWAP":
             continue
         a, b = max(gap.first - first, 0), min(gap.last - first, frames - 1)
         if a <= b:
@@ -203,7 +217,7 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
         settings = owner.mocap_gapfill
         if not len(settings.gaps):
             continue
-        take = read_original(owner, context.scene)
+        take = with_swaps_repaired(owner, read_original(owner, context.scene))
         frames = take.positions.shape[0]
         if only_active and not 0 <= settings.gap_index < len(settings.gaps):
             raise GapFillError(f"'{owner.name}': select a gap in the list first")
@@ -260,6 +274,48 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
         return results
 
     return plans, work
+
+
+#: what a repaired problem says in its gap box
+REPAIRED = {"SWAP": "labels exchanged back", "SPIKE": "cut: Fill fills it",
+            "GHOST": "cut: Fill fills it"}
+
+
+def with_swaps_repaired(owner, take):
+    """The marker take with the swaps Repair mended exchanged back, as the recovered keys hold
+    them (the fill sees the markers where they belong)."""
+    for gap in owner.mocap_gapfill.gaps:
+        if gap.kind == "SWAP" and gap.repaired and gap.other in take.points:
+            i, j = take.points.index(gap.point), take.points.index(gap.other)
+            rows = slice(gap.first - take.first, gap.last - take.first + 1)
+            take.positions[rows, [i, j]] = take.positions[rows, [j, i]]
+    return take
+
+
+def repair(owner, take, ids):
+    """Mend the listed problems ``ids`` of a marker take (read as recorded): a swap's keys
+    exchanged back into the recovered actions (typed GENERATED), a spike's or ghost's keys cut
+    there for Fill to fill. Returns how many were mended."""
+    settings, done = owner.mocap_gapfill, 0
+    for i in ids:
+        gap = settings.gaps[i]
+        if gap.kind not in REPAIRED or gap.repaired:
+            continue
+        if gap.kind == "SWAP":
+            a, b = take.points.index(gap.point), take.points.index(gap.other)
+            rows = np.arange(gap.first - take.first, gap.last - take.first + 1)
+            exchanged = take.positions * take.metres
+            exchanged[rows[:, None], [a, b]] = exchanged[rows[:, None], [b, a]]
+            mask = np.zeros(take.keyed.shape, dtype=bool)
+            mask[rows[:, None], [a, b]] = True
+            bridge.write_markers(take, exchanged, mask & np.isfinite(exchanged[..., 0]))
+            gap.filled = True
+        else:
+            bridge.revert_keys(owner, gap.point, gap.first, gap.last, every=True)
+        gap.repaired, gap.how = True, REPAIRED[gap.kind]
+        done += 1
+    settings.showing = "RECOVERED"
+    return done
 
 
 def fill_armature(take, bone_gaps, kb, settings, progress, should_cancel, report):
@@ -338,6 +394,8 @@ def describe(gap, armature):
     the panel is narrow: each source on a line of its own)."""
     if not gap.how:
         return []
+    if gap.kind in REPAIRED:
+        return [gap.how]
     if not armature:  # "from knowledge base 60%", "rigid partners 40%", the expected error
         first, *rest = gap.how.split(", ")
         return [f"from {first}", *rest] + (

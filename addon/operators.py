@@ -170,16 +170,18 @@ class MOCAP_GAPFILL_OT_detect_gaps(bpy.types.Operator):
 
     def execute(self, context):
         scene_settings = context.scene.mocap_gapfill
-        total = 0
+        total = problems = 0
         try:
             for owner in gaps.takes_in(context):
                 gaps.detect(owner, context.scene, scene_settings.detect_suspects,
                             scene_settings.jump_factor)
-                total += len(owner.mocap_gapfill.gaps)
+                found = [g.kind in gaps.REPAIRED for g in owner.mocap_gapfill.gaps]
+                total, problems = total + found.count(False), problems + sum(found)
         except (GapFillError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        self.report({"INFO"}, f"{total} gaps found")
+        self.report({"INFO"}, f"{total} gaps found" + (
+            f", and {problems} swaps, spikes or ghosts to repair first" if problems else ""))
         return {"FINISHED"}
 
 
@@ -277,6 +279,44 @@ class MOCAP_GAPFILL_OT_revert_gap(bpy.types.Operator):
         settings.showing = "RECOVERED"
         self.report({"INFO"}, f"{gap.point} {gap.first}-{gap.last}: {removed} recovered keys "
                               "taken out; the original keys either side show there")
+        return {"FINISHED"}
+
+
+class MOCAP_GAPFILL_OT_repair(bpy.types.Operator):
+    """Mend label problems: exchange swapped markers back, cut spikes and ghosts for Fill"""
+
+    bl_idname = "mocap_gapfill.repair"
+    bl_label = "Repair"
+    bl_options = {"REGISTER", "UNDO"}
+
+    scope: EnumProperty(name="Scope", default="ALL", items=(
+        ("ALL", "All problems", "Every swap, spike and ghost of the active take"),
+        ("SELECTED", "Selected problem", "The problem selected in the list")))
+
+    @classmethod
+    def poll(cls, context):
+        owner = bridge.take_owner(context.active_object)
+        if owner is None or not any(g.kind in gaps.REPAIRED and not g.repaired
+                                    for g in owner.mocap_gapfill.gaps):
+            cls.poll_message_set("Detect Gaps finds no swap, spike or ghost to repair here")
+            return False
+        return True
+
+    def execute(self, context):
+        owner = bridge.take_owner(context.active_object)
+        settings = owner.mocap_gapfill
+        ids = ([settings.gap_index] if self.scope == "SELECTED" else range(len(settings.gaps)))
+        ids = [i for i in ids if 0 <= i < len(settings.gaps)]
+        try:
+            done = gaps.repair(owner, gaps.read_original(owner, context.scene), ids)
+        except (GapFillError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        if not done:
+            self.report({"WARNING"}, "the selected entry is not a problem left to repair")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"repaired {done} problem{'s' * (done > 1)}; Fill fills what "
+                              "was cut; switch Original/Recovered to compare")
         return {"FINISHED"}
 
 
@@ -462,7 +502,7 @@ class MOCAP_GAPFILL_OT_use_recent_kb(bpy.types.Operator):
 classes = (MOCAP_GAPFILL_OT_file_info, MOCAP_GAPFILL_OT_import_markers,
            MOCAP_GAPFILL_OT_open_sample, MOCAP_GAPFILL_OT_import_skeleton, MOCAP_GAPFILL_OT_detect_gaps,
            MOCAP_GAPFILL_OT_mark_gap, MOCAP_GAPFILL_OT_remove_gap, MOCAP_GAPFILL_OT_revert_gap,
-           MOCAP_GAPFILL_OT_fill_gaps,
+           MOCAP_GAPFILL_OT_repair, MOCAP_GAPFILL_OT_fill_gaps,
            MOCAP_GAPFILL_OT_ghost, MOCAP_GAPFILL_OT_load_kb, MOCAP_GAPFILL_OT_build_kb,
            MOCAP_GAPFILL_OT_use_recent_kb)
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -4,6 +4,7 @@ import bpy
 
 from ..core import explain
 from . import bridge, gaps, prefs
+from .props import GAP_KINDS, PROBLEMS
 
 
 class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
@@ -15,10 +16,11 @@ class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
         name="Worst First", description="Sort marker gaps by their expected error, largest first")
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
-        icons = {"MISSING": "ERROR", "SUSPECT": "QUESTION", "MARKED": "BOOKMARKS"}
+        icons = {kind: icon for kind, _, _, icon, _ in GAP_KINDS}
         row = layout.row(align=True)
         split = row.split(factor=0.45, align=True)
-        split.label(text=item.point, icon=icons[item.kind])
+        split.label(text=f"{item.point} / {item.other}" if item.other else item.point,
+                    icon=icons[item.kind])
         frames = f"{item.first}-{item.last}"
         if item.expected_mm:  # what copies of a marker's gap expect of the fill's error
             split.label(text=f"~{item.expected_mm:.0f}mm {frames}")
@@ -26,7 +28,8 @@ class MOCAP_GAPFILL_UL_gaps(bpy.types.UIList):
             split.label(text=f"{frames} ({item.last - item.first + 1})")
         # filled (an armature's gap where Blender's interpolation was kept: its curve icon)
         row.label(text="", icon="IPO_LINEAR" if item.how == explain.KEPT else
-                  "CHECKMARK" if item.filled else "BLANK1")
+                  "CHECKMARK" if item.filled else "TOOL_SETTINGS" if item.repaired else
+                  "BLANK1")
 
     def draw_filter(self, context, layout):
         row = layout.row(align=True)
@@ -133,6 +136,11 @@ class MOCAP_GAPFILL_PT_gaps(_Panel, bpy.types.Panel):
         column = row.column(align=True)
         column.operator("mocap_gapfill.remove_gap", text="", icon="X")
         column.operator("mocap_gapfill.revert_gap", text="", icon="LOOP_BACK")
+        if any(g.kind in PROBLEMS and not g.repaired for g in settings.gaps):
+            row = layout.row(align=True)
+            row.operator("mocap_gapfill.repair", text="Repair Selected").scope = "SELECTED"
+            row.operator("mocap_gapfill.repair", text="Repair All",
+                         icon="TOOL_SETTINGS").scope = "ALL"
         if 0 <= settings.gap_index < len(settings.gaps) and settings.gaps[settings.gap_index].how:
             gap = settings.gaps[settings.gap_index]
             column = layout.box().column(align=True)

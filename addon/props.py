@@ -9,7 +9,15 @@ GAP_KINDS = (
     ("MISSING", "Missing", "No key on these frames", "ERROR", 0),
     ("SUSPECT", "Suspect", "Keyed, but jumps or stretches a limb", "QUESTION", 1),
     ("MARKED", "Marked", "Marked by hand", "BOOKMARKS", 2),
+    ("SWAP", "Swap", "Two markers' labels exchanged over these frames (Repair exchanges them "
+     "back)", "ARROW_LEFTRIGHT", 3),
+    ("SPIKE", "Spike", "Keys that leave the body's rigid structure for a few frames (Repair "
+     "cuts them, Fill fills them)", "IPO_ELASTIC", 4),
+    ("GHOST", "Ghost", "The label picked up another trajectory (Repair cuts it, Fill fills "
+     "it)", "GHOST_ENABLED", 5),
 )
+#: the kinds that are problems of the labels, not gaps (Repair, not Fill, mends them)
+PROBLEMS = ("SWAP", "SPIKE", "GHOST")
 UNITS = (
     ("AUTO", "Auto", "Guess from the height of the take (a person is about 1.7 m)"),
     ("M", "Metres", ""), ("CM", "Centimetres", ""), ("MM", "Millimetres", ""),
@@ -49,6 +57,8 @@ class MOCAP_GAPFILL_PG_gap(bpy.types.PropertyGroup):
     """One gap: a point (marker or bone) over an inclusive frame range"""
 
     point: StringProperty(name="Point")
+    other: StringProperty(name="Other point", description="A swap's second marker")
+    repaired: BoolProperty(name="Repaired", description="Repair mended this problem")
     first: IntProperty(name="First frame")
     last: IntProperty(name="Last frame")
     kind: EnumProperty(name="Kind", items=GAP_KINDS, default="MISSING")
