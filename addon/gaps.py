@@ -276,6 +276,13 @@ def plan_fill(context, owners, only_active=False, method=DEFAULT_METHOD, k=0, ma
     return plans, work
 
 
+#: what a problem left to repair says in its gap box
+PROBLEM_WORDS = {"SWAP": ["the two markers' labels are exchanged here:",
+                          "Repair swaps their keys back"],
+                 "SPIKE": ["the keys leave the body's rigid structure:",
+                           "Repair cuts them, Fill fills them"],
+                 "GHOST": ["the label follows another trajectory here:",
+                           "Repair cuts it, Fill fills it"]}
 #: what a repaired problem says in its gap box
 REPAIRED = {"SWAP": "labels exchanged back", "SPIKE": "cut: Fill fills it",
             "GHOST": "cut: Fill fills it"}
@@ -392,10 +399,10 @@ def how_carried(accounts, point, first, last):
 def describe(gap, armature):
     """How a filled gap was filled, in lines of plain words (the panel and ``blend`` say them;
     the panel is narrow: each source on a line of its own)."""
+    if gap.kind in REPAIRED:  # a label problem: what it is, or what Repair did
+        return [gap.how] if gap.how else PROBLEM_WORDS[gap.kind]
     if not gap.how:
         return []
-    if gap.kind in REPAIRED:
-        return [gap.how]
     if not armature:  # "from knowledge base 60%", "rigid partners 40%", the expected error
         first, *rest = gap.how.split(", ")
         return [f"from {first}", *rest] + (

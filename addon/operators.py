@@ -283,7 +283,7 @@ class MOCAP_GAPFILL_OT_revert_gap(bpy.types.Operator):
 
 
 class MOCAP_GAPFILL_OT_repair(bpy.types.Operator):
-    """Mend label problems: exchange swapped markers back, cut spikes and ghosts for Fill"""
+    """Repair label problems: exchange swapped markers back, cut spikes and ghosts for Fill"""
 
     bl_idname = "mocap_gapfill.repair"
     bl_label = "Repair"

@@ -141,10 +141,12 @@ class MOCAP_GAPFILL_PT_gaps(_Panel, bpy.types.Panel):
             row.operator("mocap_gapfill.repair", text="Repair Selected").scope = "SELECTED"
             row.operator("mocap_gapfill.repair", text="Repair All",
                          icon="TOOL_SETTINGS").scope = "ALL"
-        if 0 <= settings.gap_index < len(settings.gaps) and settings.gaps[settings.gap_index].how:
-            gap = settings.gaps[settings.gap_index]
+        gap = (settings.gaps[settings.gap_index]
+               if 0 <= settings.gap_index < len(settings.gaps) else None)
+        if gap is not None and (gap.how or gap.kind in PROBLEMS):
             column = layout.box().column(align=True)
-            column.label(text=f"{gap.point} {gap.first}-{gap.last}:", icon="INFO")
+            names = f"{gap.point} / {gap.other}" if gap.other else gap.point
+            column.label(text=f"{names} {gap.first}-{gap.last}:", icon="INFO")
             for line in gaps.describe(gap, owner.type == "ARMATURE"):
                 column.label(text=line)
         layout.prop(context.scene.mocap_gapfill, "detect_suspects")

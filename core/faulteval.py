@@ -136,6 +136,10 @@ def evaluate_faults(tests, kb, fps=None, seed=0, progress=None, report=None, rou
             truth = truth.select([p for p in truth.names if p in mine.names])
         for kind, round_ in ((k, r) for k in KINDS for r in range(rounds)):
             faulted, truths, repair, counts = run_take(truth, kind, seed + round_)
+            if not truths:  # shorter than the room a fault needs
+                if report and round_ == 0:
+                    report(f"{Path(test).name} {kind}: the take is too short for it; skipped")
+                continue
             mask = faulted_mask(truths, truth.missing.shape) & ~truth.missing
             suspect = find_suspects(faulted.positions, faulted.fps, faulted.limbs)
             cut = faulted.replace(positions=np.where(suspect[..., None], np.nan,

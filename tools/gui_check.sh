@@ -31,6 +31,19 @@ sed -i '/^wheels = \[/,/^\]/d' "$ROOTFS/work/repo/mocap_gapfill/blender_manifest
 cp tools/gui_session.py "$ROOTFS/work/"
 # the real marker take as .npz: Debian's Blender has no ezc3d to read the C3D
 .venv/bin/mocap-gapfill convert sample_scenes/01_01.c3d "$ROOTFS/work/out/01_01.npz" --force
+# a take with a label swap (LFHD / RWRA, frames 201-260) and a 40 mm spike (LKNE, 301-304)
+.venv/bin/python - "$ROOTFS/work/out/06_01_faulty.npz" <<'PY'
+import sys
+from pathlib import Path
+from mocap_gapfill.core.io import read_motion, write_motion
+data = Path(__import__("os").environ.get("MOCAP_GAPFILL_DATA", "../shared/data"))
+take = read_motion(data / "cmu/c3d/06_01.c3d")
+pos = take.positions.copy()
+i, j = take.names.index("LFHD"), take.names.index("RWRA")
+pos[200:260, [i, j]] = pos[200:260, [j, i]]
+pos[300:304, take.names.index("LKNE"), 1] += 0.04
+write_motion(take.replace(positions=pos), Path(sys.argv[1]), overwrite=True)
+PY
 for m in proc sys dev; do mountpoint -q "$ROOTFS/$m" || mount --bind "/$m" "$ROOTFS/$m"; done
 trap 'for m in dev sys proc; do umount -l "$ROOTFS/$m" 2>/dev/null || true; done' EXIT
 chroot "$ROOTFS" bash -c '

@@ -179,6 +179,8 @@ def step():
         say("fill of 01_01 invoked:", result)
         state["step"] = 5
         return 0.1
+    if state["step"] >= 10:
+        return problems_step()
     if state["step"] >= 7:
         return sample_step(state, window, area, wm)
     if wm.mocap_gapfill.running:
@@ -275,7 +277,55 @@ def sample_step(state, window, area, wm):
     gap = arm.mocap_gapfill.gaps[arm.mocap_gapfill.gap_index]
     say("revert gap:", result, gap.point, "filled:", gap.filled, "still filled:",
         sum(g.filled for g in arm.mocap_gapfill.gaps))
-    bpy.ops.wm.quit_blender()
+    state["step"] = 10
+    return 1.0
+
+
+def problems_step():
+    """A take with a label swap and a spike (CMU 06_01 made faulty by gui_check.sh): Detect Gaps
+    lists them with their own icons, Repair All mends them, one Ctrl-Z undoes the repair."""
+    state = STATE
+    window, area = view3d()
+    if state["step"] == 10:
+        with bpy.context.temp_override(window=window, area=area):
+            bpy.ops.mocap_gapfill.import_markers(filepath=f"{OUT}/06_01_faulty.npz")
+            # the undo steps a user's clicks leave (a script's operator calls leave none)
+            bpy.ops.ed.undo_push(message="Import C3D")
+            result = bpy.ops.mocap_gapfill.detect_gaps()
+            bpy.ops.ed.undo_push(message="Detect Gaps")
+        root = bpy.data.objects["06_01_faulty"]
+        listed = list(root.mocap_gapfill.gaps)
+        say("problems listed:", result, [(g.kind, g.point, g.other, g.first, g.last)
+                                         for g in listed if g.kind in ("SWAP", "SPIKE", "GHOST")])
+        root.mocap_gapfill.gap_index = next(i for i, g in enumerate(listed) if g.kind == "SWAP")
+        for o in bpy.context.view_layer.objects:  # frame the markers (the root is at 0)
+            o.select_set(o.parent == root)
+        bpy.context.view_layer.objects.active = root
+        bpy.context.scene.frame_set(230)
+        region = [r for r in area.regions if r.type == "WINDOW"][0]
+        with bpy.context.temp_override(window=window, area=area, region=region):
+            bpy.ops.view3d.view_selected()
+        state["step"] = 11
+        return 1.0
+    root = bpy.data.objects["06_01_faulty"]
+    if state["step"] == 11:
+        shot("7_problems_listed")
+        with bpy.context.temp_override(window=window, area=area):
+            result = bpy.ops.mocap_gapfill.repair(scope="ALL")
+        bpy.ops.ed.undo_push(message="Repair")  # what a click on the button (UNDO flag) leaves
+        say("repair all:", result, [(g.kind, g.repaired, g.how) for g in root.mocap_gapfill.gaps
+                                    if g.kind in ("SWAP", "SPIKE", "GHOST")])
+        state["step"] = 12
+        return 1.0
+    if state["step"] == 12:
+        shot("8_problems_repaired")
+        with bpy.context.temp_override(window=window, area=area):
+            bpy.ops.ed.undo()
+        root = bpy.data.objects["06_01_faulty"]  # Detect Gaps' list is back, unrepaired
+        say("after one Ctrl-Z:", [(g.kind, g.repaired) for g in root.mocap_gapfill.gaps
+                                  if g.kind in ("SWAP", "SPIKE", "GHOST")],
+            "showing", root.mocap_gapfill.showing)
+        bpy.ops.wm.quit_blender()
     return None
 
 

@@ -42,6 +42,9 @@ def test_a_swap_and_a_spike_are_listed_repaired_and_filled(faulty):
     # the take's own jumps stay suspects; none of them is one of the problems again
     assert all(g[0] == "SUSPECT" and g[1] not in ("LKNE", "LFHD", "RWRA")
                for g in listed if g not in problems)
+    swap = next(g for g in root.mocap_gapfill.gaps if g.kind == "SWAP")
+    assert gaps.describe(swap, False) == ["the two markers' labels are exchanged here:",
+                                          "Repair swaps their keys back"]
     assert "REGISTER" in bpy.types.MOCAP_GAPFILL_OT_repair.bl_options
     assert "UNDO" in bpy.types.MOCAP_GAPFILL_OT_repair.bl_options  # one Ctrl-Z undoes it
 

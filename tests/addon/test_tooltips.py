@@ -8,7 +8,7 @@ LOCAL_MODULE = "bl_ext.mocap_gapfill_tests.mocap_gapfill"  # conftest.extension 
 #: characters: Blender's own tooltips are a line or two
 LONGEST = 120
 #: the verbs an operator's tooltip starts with
-VERBS = {"Build", "Choose", "Fill", "Find", "Import", "Mark", "Open", "Read", "Remove", "Show",
+VERBS = {"Build", "Repair", "Choose", "Fill", "Find", "Import", "Mark", "Open", "Read", "Remove", "Show",
          "Take", "Use"}
 
 
