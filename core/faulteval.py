@@ -1,7 +1,8 @@
 """The ``faults`` protocol: swaps, spikes and ghost take-overs injected into complete real marker
 takes, found by :func:`~.faults.find_faults`, and the faulted samples after repair and fill.
 
-Per take and kind of fault, one fault every ``EVERY`` seconds, each on markers of its own:
+Per take and kind of fault, one fault every 2.5 s, each on markers of its own
+(:class:`FaultProtocol`):
 
 - swap: two markers 50-500 mm apart (median distance) exchange trajectories for 0.1-2 s;
 - spike: one marker moves 20-200 mm (a random direction) for 1-10 frames;
@@ -19,13 +20,21 @@ import numpy as np
 
 from .faults import find_faults
 
-EVERY = 2.5  # seconds between faults
-SWAP_SECONDS = (0.1, 2.0)
-SPIKE_FRAMES = (1, 10)
-SPIKE_MM = (20, 200)
-GHOST_SECONDS = (0.5, 2.5)
 KINDS = ("swap", "spike", "ghost")
-ROUNDS = 3  # seeds per take and kind (a short take holds few faults a round)
+
+
+@dataclass(frozen=True)
+class FaultProtocol:
+    """The faults the protocol injects: one every ``every`` seconds; swaps of ``swap_seconds``,
+    spikes of ``spike_frames`` and ``spike_mm``, ghosts of ``ghost_seconds`` (ranges); and
+    ``rounds`` seeds per take and kind (a short take holds few faults a round)."""
+
+    every: float = 2.5
+    swap_seconds: tuple = (0.1, 2.0)
+    spike_frames: tuple = (1, 10)
+    spike_mm: tuple = (20, 200)
+    ghost_seconds: tuple = (0.5, 2.5)
+    rounds: int = 3
 
 
 @dataclass(frozen=True)
@@ -37,11 +46,11 @@ class Injected:
     barred: bool  # within the issue's bar (swap >= 0.25 s, spike >= 30 mm, every ghost)
 
 
-def inject(motion, kind, rng):
-    """``(faulted motion, [Injected, ...])``: faults of ``kind`` put into a complete take."""
+def inject(motion, kind, rng, protocol=FaultProtocol()):
+    """``(faulted motion, [Injected, ...])``: faults of ``kind`` put into a take."""
     pos = motion.positions.copy()
     frames, points = pos.shape[:2]
-    every = int(round(EVERY * motion.fps))
+    every = int(round(protocol.every * motion.fps))
     with np.errstate(invalid="ignore"):
         apart = np.nanmedian(np.linalg.norm(pos[::10, :, None] - pos[::10, None], axis=3), axis=0)
     truths = []
@@ -49,13 +58,13 @@ def inject(motion, kind, rng):
         i = int(rng.integers(points))
         others = np.flatnonzero((apart[i] >= 0.05) & (apart[i] <= 0.5))
         if kind == "spike":
-            length = int(rng.integers(SPIKE_FRAMES[0], SPIKE_FRAMES[1] + 1))
-            size = rng.uniform(*SPIKE_MM) / 1000
+            length = int(rng.integers(protocol.spike_frames[0], protocol.spike_frames[1] + 1))
+            size = rng.uniform(*protocol.spike_mm) / 1000
             way = rng.standard_normal(3)
             j, barred = i, size >= 0.03
         elif len(others):
             j = int(rng.choice(others))
-            span = SWAP_SECONDS if kind == "swap" else GHOST_SECONDS
+            span = protocol.swap_seconds if kind == "swap" else protocol.ghost_seconds
             length = min(every - 2, int(rng.integers(round(span[0] * motion.fps),
                                                      round(span[1] * motion.fps) + 1)))
             barred = kind == "ghost" or length >= 0.25 * motion.fps
@@ -98,10 +107,11 @@ def score(events, truths, names, kind):
     return found, sum(t.barred for t in truths), right, len(mine)
 
 
-def run_take(motion, kind, seed, config=None):
+def run_take(motion, kind, seed, config=None, protocol=FaultProtocol()):
     """One take, one kind: the faulted motion, the truths, the :class:`~.faults.Repair` and the
     score (:func:`score`)."""
-    faulted, truths = inject(motion, kind, np.random.default_rng([seed, *kind.encode()]))
+    faulted, truths = inject(motion, kind, np.random.default_rng([seed, *kind.encode()]),
+                             protocol)
     repair = find_faults(faulted, config)
     return faulted, truths, repair, score(repair.faults, truths, motion.names, kind)
 
@@ -114,9 +124,10 @@ def faulted_mask(truths, shape):
     return mask
 
 
-def evaluate_faults(tests, kb, fps=None, seed=0, progress=None, report=None, rounds=ROUNDS):
-    """The ``faults`` protocol on each test take (read as it is, at ``fps``), ``rounds`` times
-    (seeds ``seed``, ``seed + 1``, ...): per take, kind and round a result dict with the counts
+def evaluate_faults(tests, kb, fps=None, seed=0, progress=None, report=None,
+                    protocol=FaultProtocol()):
+    """The ``faults`` protocol on each test take (read as it is, at ``fps``),
+    ``protocol.rounds`` times (seeds ``seed``, ``seed + 1``, ...): per take, kind and round a result dict with the counts
     of :func:`score`, recall and precision, and the RMSE (mm) over the faulted samples of doing
     nothing, of today's jump and limb check (``suspects``: its samples cut, then filled) and of
     the repair then fill, ``auto`` with ``kb`` (the test subject left out; None: the take
@@ -128,14 +139,15 @@ def evaluate_faults(tests, kb, fps=None, seed=0, progress=None, report=None, rou
     from .io import read_motion
     from .suspect import find_suspects
 
-    results = []
+    results, rounds = [], protocol.rounds
     for n, test in enumerate(tests):
         truth = marker_take(_at_rate(read_motion(test), fps or read_motion(test).fps))
         mine = None if kb is None else kb_without(kb, subject_of(test))
         if mine is not None:
             truth = truth.select([p for p in truth.names if p in mine.names])
         for kind, round_ in ((k, r) for k in KINDS for r in range(rounds)):
-            faulted, truths, repair, counts = run_take(truth, kind, seed + round_)
+            faulted, truths, repair, counts = run_take(truth, kind, seed + round_, None,
+                                                       protocol)
             if not truths:  # shorter than the room a fault needs
                 if report and round_ == 0:
                     report(f"{Path(test).name} {kind}: the take is too short for it; skipped")

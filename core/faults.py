@@ -7,7 +7,7 @@ that leaves the body's rigid structure moves far, and so does its label:
 
 - a **swap**: two markers off over the same stretch, each of which sits where the other
   belongs (refitted from the other's partners, it hardly moves): the labels are exchanged back;
-- a **spike**: off for at most ``MAX_SPIKE`` frames: cut, then filled like any gap;
+- a **spike**: off for at most ``max_spike`` frames (10): cut, then filled like any gap;
 - a **ghost**: off for longer (a lost label picked up by another trajectory): cut.
 
 The thresholds (how far is off) are fitted by leave-one-subject-out on takes that are not test
@@ -23,8 +23,6 @@ import numpy as np
 
 from .posing import best_rotation
 
-#: runs of off frames up to this long are spikes, longer ones ghosts (the issue's definition)
-MAX_SPIKE = 10
 FITTED = Path(__file__).with_name("faults.json")
 
 
@@ -39,6 +37,7 @@ class FaultConfig:
     floor: float = 0.03
     factor: float = 8.0
     ghost_floor: float = 0.03
+    max_spike: int = 10  # frames: a spike is at most this long (a ghost longer)
     partners: int = 6
     stats_frames: int = 2000
 
@@ -116,7 +115,8 @@ def carried(pos, points, src, dst, partners, spread, leave_out=None, by=None):
     weight = np.where(both, weight, 0.0)
     total = np.maximum(weight.sum(axis=1), 1e-300)[:, None]
     a, b = np.nan_to_num(a), np.nan_to_num(b)
-    ca, cb = (weight[..., None] * a).sum(axis=1) / total, (weight[..., None] * b).sum(axis=1) / total
+    ca = (weight[..., None] * a).sum(axis=1) / total
+    cb = (weight[..., None] * b).sum(axis=1) / total
     rotation, _ = best_rotation(np.sqrt(weight)[..., None] * (a - ca[:, None]),
                                 np.sqrt(weight)[..., None] * (b - cb[:, None]))
     out = (rotation @ (pos[src, points] - ca)[..., None])[..., 0] + cb
@@ -140,7 +140,7 @@ def find_faults(motion, config=None):
     if faults:
         take = _Take(pos, config, take.partners)
     for p, a, b in take.departures():
-        kind = "spike" if b - a + 1 <= MAX_SPIKE else "ghost"
+        kind = "spike" if b - a + 1 <= config.max_spike else "ghost"
         pos[a:b + 1, p] = np.nan
         changed[a:b + 1, p] = True
         faults.append(Fault(kind, (motion.names[p],), a, b))
@@ -164,7 +164,8 @@ def repaired(motion, config=None):
 def said(fault):
     """One line for the user: ``swap LFHD / RFHD frames 121-181: labels exchanged back``."""
     done = "labels exchanged back" if fault.kind == "swap" else "cut, then filled as a gap"
-    return f"{fault.kind} {' / '.join(fault.points)} frames {fault.first + 1}-{fault.last + 1}: {done}"
+    return (f"{fault.kind} {' / '.join(fault.points)} frames {fault.first + 1}-"
+            f"{fault.last + 1}: {done}")
 
 
 class _Take:
@@ -241,7 +242,7 @@ class _Take:
 
     def departures(self):
         """``(p, first, last)``: a marker jumps by more than ``config.floor`` and comes back
-        within ``MAX_SPIKE`` frames to where its partners carry it from before (off all the
+        within ``config.max_spike`` frames to where its partners carry it from before (off all the
         while by at least half of its jump; a spike), or leaves at an edge and stays away
         (:meth:`_stepped`; a ghost: to where it comes back, or to the end of the stretch it is
         seen)."""
@@ -265,7 +266,7 @@ class _Take:
 
     def _spike(self, p, t, end):
         """The last frame of a spike of marker ``p`` from ``t`` (None where it is none)."""
-        later = np.arange(t, min(end, t + MAX_SPIKE + 1))
+        later = np.arange(t, min(end, t + self.config.max_spike + 1))
         away = self.miss(np.full(len(later), p), np.full(len(later), t - 1), later)
         size = self.jump[t, p]
         with np.errstate(invalid="ignore"):
@@ -276,20 +277,21 @@ class _Take:
 
     def _stepped(self, p, t, end):
         """Whether marker ``p`` steps away at ``t`` and stays there: carried by its partners to
-        frame ``t - 1``, its places over the ``MAX_SPIKE`` frames before ``t`` gather at
+        frame ``t - 1``, its places over the ``config.max_spike`` frames before ``t`` gather at
         ``t - 1``'s and those from ``t`` on (to ``end``) gather away from it, by more than its
         limit, each within half of it (a drift of the partners' carry grows instead)."""
-        frames = np.arange(max(0, t - MAX_SPIKE), min(end, t + MAX_SPIKE))
+        span = self.config.max_spike
+        frames = np.arange(max(0, t - span), min(end, t + span))
         frames = frames[np.isfinite(self.pos[frames, p, 0])]
         before, after = frames[frames < t], frames[frames >= t]
-        if len(before) < MAX_SPIKE // 2 or len(after) < MAX_SPIKE // 2:
+        if len(before) < span // 2 or len(after) < span // 2:
             return False
         places = carried(self.pos, np.full(len(frames), p), frames, np.full(len(frames), t - 1),
                          *self.partners[::2])
         off = np.linalg.norm(places - self.pos[t - 1, p], axis=1)
         half, away = 0.5 * self.limit[p], max(self.limit[p], self.config.ghost_floor)
         # and away from where it was before those frames too (not the end of a spike)
-        early = t - MAX_SPIKE - 1
+        early = t - span - 1
         if early >= 0 and np.isfinite(self.pos[early, p, 0]):
             from_early = self.miss(np.full(len(after), p), np.full(len(after), early), after)
         else:
@@ -320,13 +322,13 @@ class _Take:
     def _back(self, p, t, first, stop):
         """Frames ``first``..``stop - 1`` where marker ``p``, which left at ``t``, is back within
         its limit of where its partners carry it from ``t - 1``, and stays there over the next
-        ``MAX_SPIKE`` frames (in the median: another trajectory may pass by its place)."""
+        ``config.max_spike`` frames (in the median: another trajectory may pass by its place)."""
         later = np.arange(first, stop)
         away = self.miss(np.full(len(later), p), np.full(len(later), t - 1), later)
         with np.errstate(invalid="ignore"), _quiet():
             back = away <= self.limit[p]
             return [u for u, k in zip(later[back], np.flatnonzero(back))
-                    if np.nanmedian(away[k:k + MAX_SPIKE]) <= self.limit[p]]
+                    if np.nanmedian(away[k:k + self.config.max_spike]) <= self.limit[p]]
 
 
 class _quiet(np.errstate):

@@ -326,9 +326,9 @@ def _fill_performers(motion, groups, method, kb, settings, progress, should_canc
                         said(f"left unfilled: {exc}")
                     continue
         step = (lambda f, m, n=n: progress((n + f) / len(groups), m)) if progress else None
-        out, mine = fill(part, method, kb=fits, settings=settings, progress=step, should_cancel=should_cancel,
-                         report=said, max_gap=max_gap, return_account=True, trace=trace,
-                         config=config)
+        out, mine = fill(part, method, kb=fits, settings=settings, progress=step,
+                         should_cancel=should_cancel, report=said, max_gap=max_gap,
+                         return_account=True, trace=trace, config=config)
         positions[:, members] = out.positions
         filled[:, members] = out.filled if out.filled is not None else False
         accounts += [replace(a, point=names[part.names.index(a.point)]) for a in mine or []]

@@ -193,13 +193,7 @@ def step():
     if state["step"] == 5:
         gap = next(g for g in root.mocap_gapfill.gaps if g.point.split(".")[0] == "RBAC")
         root.mocap_gapfill.gap_index = list(root.mocap_gapfill.gaps).index(gap)
-        for o in bpy.context.view_layer.objects:  # frame the markers (the root is at 0)
-            o.select_set(o.parent == root)
-        bpy.context.view_layer.objects.active = root
-        bpy.context.scene.frame_set((gap.first + gap.last) // 2)
-        region = [r for r in area.regions if r.type == "WINDOW"][0]
-        with bpy.context.temp_override(window=window, area=area, region=region):
-            bpy.ops.view3d.view_selected()
+        frame_markers(root, window, area, (gap.first + gap.last) // 2)
         state["step"] = 6
         return 1.0
     shot("4_real_markers_filled")
@@ -232,6 +226,17 @@ def frame_object(obj, area, frame):
     region = [r for r in area.regions if r.type == "WINDOW"][0]
     with bpy.context.temp_override(window=bpy.context.window_manager.windows[0], area=area,
                                    region=region):
+        bpy.ops.view3d.view_selected()
+
+
+def frame_markers(root, window, area, frame):
+    """Select a marker set's markers, go to ``frame`` and frame them (the root is at 0)."""
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o.parent == root)
+    bpy.context.view_layer.objects.active = root
+    bpy.context.scene.frame_set(frame)
+    region = [r for r in area.regions if r.type == "WINDOW"][0]
+    with bpy.context.temp_override(window=window, area=area, region=region):
         bpy.ops.view3d.view_selected()
 
 
@@ -298,13 +303,7 @@ def problems_step():
         say("problems listed:", result, [(g.kind, g.point, g.other, g.first, g.last)
                                          for g in listed if g.kind in ("SWAP", "SPIKE", "GHOST")])
         root.mocap_gapfill.gap_index = next(i for i, g in enumerate(listed) if g.kind == "SWAP")
-        for o in bpy.context.view_layer.objects:  # frame the markers (the root is at 0)
-            o.select_set(o.parent == root)
-        bpy.context.view_layer.objects.active = root
-        bpy.context.scene.frame_set(230)
-        region = [r for r in area.regions if r.type == "WINDOW"][0]
-        with bpy.context.temp_override(window=window, area=area, region=region):
-            bpy.ops.view3d.view_selected()
+        frame_markers(root, window, area, 230)
         state["step"] = 11
         return 1.0
     root = bpy.data.objects["06_01_faulty"]

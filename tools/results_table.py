@@ -112,7 +112,7 @@ def summary_table(paths):
            "|---|---|---:|---|---:|---:|---:|"]
     for path in paths:
         payload = json.loads(Path(path).read_text())
-        if "protocol" not in payload:
+        if payload.get("protocol") in (None, "faults"):  # (faults: its own table)
             continue
         rows, default = payload["results"], payload.get("default_method", "knn")
         baselines = payload.get("baselines") or [m for m in {r["method"] for r in rows}

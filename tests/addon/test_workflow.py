@@ -105,7 +105,7 @@ def test_a_marker_gap_names_every_estimate_blended_into_it(extension):
                            spline=0.0, pattern=0.0, estimate=0.009)]
     how, _, expected = gaps.how_carried(accounts, "LELB", 8, 20)
     assert how == "rigid partners 40%, smooth curve 34%, a partner's path 25%" and expected == 3.0
-    assert gaps.describe(SimpleNamespace(how=how, expected_mm=expected), False) == [
+    assert gaps.describe(SimpleNamespace(how=how, expected_mm=expected, kind="MISSING"), False) == [
         "from rigid partners 40%", "smooth curve 34%", "a partner's path 25%",
         "expected error ~3 mm"]
 
@@ -144,7 +144,8 @@ def test_an_armature_gap_names_the_fills_it_went_to(extension):
         "a blend of several fills (50% of the way from Blender's curve), blended with a smooth "
         "curve, knowledge-base motion and its own motion")
     # the panel is narrow: each source on a line of its own
-    listed = SimpleNamespace(how=gaps.how_filled(choices, "lShldr", 10, 24)[0], estimate=0.6)
+    listed = SimpleNamespace(how=gaps.how_filled(choices, "lShldr", 10, 24)[0], estimate=0.6,
+                             kind="MISSING")
     assert gaps.describe(listed, True) == [
         "from knowledge-base motion (50% of the way from Blender's curve)",
         "blended with a smooth curve", "and the other bones",
