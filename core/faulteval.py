@@ -127,11 +127,11 @@ def faulted_mask(truths, shape):
 def evaluate_faults(tests, kb, fps=None, seed=0, progress=None, report=None,
                     protocol=FaultProtocol()):
     """The ``faults`` protocol on each test take (read as it is, at ``fps``),
-    ``protocol.rounds`` times (seeds ``seed``, ``seed + 1``, ...): per take, kind and round a result dict with the counts
-    of :func:`score`, recall and precision, and the RMSE (mm) over the faulted samples of doing
-    nothing, of today's jump and limb check (``suspects``: its samples cut, then filled) and of
-    the repair then fill, ``auto`` with ``kb`` (the test subject left out; None: the take
-    alone)."""
+    ``protocol.rounds`` times (seeds ``seed``, ``seed + 1``, ...): per take, kind and round a
+    result dict with the counts of :func:`score`, recall and precision, and the RMSE (mm) over
+    the faulted samples of doing nothing, of today's jump and limb check (``suspects``: its
+    samples cut, then filled) and of the repair then fill, ``auto`` with ``kb`` (the test
+    subject left out; None: the take alone)."""
     from pathlib import Path
 
     from .evaluate import _at_rate, kb_without, rmse_mm, subject_of
