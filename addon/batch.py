@@ -52,6 +52,10 @@ def run(args, report=print):
     found = []
     for owner in owners:
         gaps.detect(owner, scene, suspects=not args.no_suspects)
+        problems = [i for i, g in enumerate(owner.mocap_gapfill.gaps) if g.kind in gaps.REPAIRED]
+        if problems:  # label swaps, spikes and ghosts first, as the Repair button does
+            done = gaps.repair(owner, gaps.read_original(owner, scene), problems)
+            report(f"{owner.name}: repaired {done} label swaps, spikes or ghosts first")
         report(f"{owner.name}: {len(owner.mocap_gapfill.gaps)} gaps")
         found += [g.last - g.first + 1 for g in owner.mocap_gapfill.gaps]
     owners = [o for o in owners if len(o.mocap_gapfill.gaps)]

@@ -36,7 +36,8 @@ def add_arguments(parser, with_input=False):
     parser.add_argument("-K", type=int, default=0, help="neighbours per frame (0: automatic)")
     parser.add_argument("--max-gap", type=int, default=0, help="leave longer gaps unfilled")
     parser.add_argument("--no-suspects", action="store_true",
-                        help="do not treat jumping or stretching keys as gaps")
+                        help="do not treat jumping or stretching keys as gaps, nor repair "
+                             "label swaps, spikes and ghosts")
     parser.add_argument("--device", default="auto", choices=DEVICES,
                         help="where the knn search runs (torch is optional)")
     parser.add_argument("--stats", metavar="FILE.json", help="also write what was done as JSON "

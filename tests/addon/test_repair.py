@@ -80,3 +80,29 @@ def test_a_swap_and_a_spike_are_listed_repaired_and_filled(faulty):
     assert (rmse_mm(filled.positions[rows, knee] * m, truth.positions[rows, knee])
             < 0.2 * rmse_mm(faulty.positions[rows, knee], truth.positions[rows, knee]))
     assert np.abs(filled.positions[seen] * m - truth.positions[seen]).max() < 1e-5
+
+
+def test_a_blend_run_repairs_first(faulty, tmp_path):
+    """``blend`` / ``blender -b -c mocap_gapfill`` repairs the label problems before it fills."""
+    import argparse
+    import importlib
+
+    import bpy
+
+    from test_workflow import LOCAL_MODULE
+
+    batch = importlib.import_module(f"{LOCAL_MODULE}.addon.batch")
+    commands = importlib.import_module(f"{LOCAL_MODULE}.addon.commands")
+    bridge, _, _, _ = modules()
+    root, truth, _ = faulty
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "faulty.blend"))
+    parser = argparse.ArgumentParser()
+    commands.add_arguments(parser)
+    said = []
+    batch.run(parser.parse_args(["--method", "linear"]), report=said.append)
+    assert f"{root.name}: repaired 2 label swaps, spikes or ghosts first" in said
+    take = bridge.read_take(root, bpy.context.scene)
+    truth = truth.select(list(take.names))
+    swap = np.zeros(take.keyed.shape, bool)
+    swap[200:260, [take.points.index("LFHD"), take.points.index("RWRA")]] = True
+    assert np.abs(take.positions[swap] * take.metres - truth.positions[swap]).max() < 1e-5
