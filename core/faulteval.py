@@ -141,7 +141,8 @@ def evaluate_faults(tests, kb, fps=None, seed=0, progress=None, report=None,
 
     results, rounds = [], protocol.rounds
     for n, test in enumerate(tests):
-        truth = marker_take(_at_rate(read_motion(test), fps or read_motion(test).fps))
+        motion = read_motion(test)
+        truth = marker_take(_at_rate(motion, fps or motion.fps))
         mine = None if kb is None else kb_without(kb, subject_of(test))
         if mine is not None:
             truth = truth.select([p for p in truth.names if p in mine.names])

@@ -184,8 +184,8 @@ class _Take:
         t, p = t.ravel(), p.ravel()
         self.jump = np.full((frames, points), np.nan)
         self.jump[t, p] = self.miss(p, t - 1, t)
-        with _quiet():  # the median: a long fault of a short take does not raise it
-            typical = np.nanmedian(self.jump, axis=0)
+        typical = _nanmedian0(self.jump)  # the median: a long fault of a short take does not
+        # raise it
         self.limit = np.maximum(config.floor, config.factor * np.nan_to_num(typical))
         with np.errstate(invalid="ignore"):
             t, p = np.nonzero(self.jump > config.floor)
