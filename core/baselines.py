@@ -34,7 +34,7 @@ import numpy as np
 
 from .errors import GapFillError
 from .motion import gap_runs, interpolate_rows
-from .posing import best_rotation
+from .posing import rigidly_carried
 
 #: donors of a rigid-body fill
 RIGID_DONORS = 3
@@ -556,7 +556,6 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
     w /= w.sum(axis=1, keepdims=True)
     cw = w[..., None]  # (rows, donors, 1)
     cur = pos[t[:, None], chosen]  # (rows, donors, 3)
-    c_cur = (cur * cw).sum(axis=1)
     found = np.zeros((len(rows), 3))
     for k in range(2):
         use = refs[:, k] >= 0
@@ -564,10 +563,7 @@ def _carry(pos, seen, p, runs, steady, donors, weighted, reach=None):
             continue
         ref_t = refs[use, k]
         ref = pos[ref_t[:, None], chosen[use]]  # (rows, donors, 3)
-        c_ref = (ref * cw[use]).sum(axis=1)
-        rot, _ = best_rotation((ref - c_ref[:, None]) * np.sqrt(cw[use]),
-                               (cur[use] - c_cur[use][:, None]) * np.sqrt(cw[use]), lean=LEAN)
-        moved = np.einsum("fij,fj->fi", rot, pos[ref_t, p] - c_ref) + c_cur[use]
+        moved = rigidly_carried(ref, cur[use], cw[use], pos[ref_t, p], lean=LEAN)
         found[use] += weights[use, k][:, None] * moved
     estimate[rows] = found
     rms[rows] = np.sqrt(np.mean(costs ** 2, axis=1))

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .posing import best_rotation
+from .posing import rigidly_carried
 
 FITTED = Path(__file__).with_name("faults.json")
 
@@ -113,13 +113,9 @@ def carried(pos, points, src, dst, partners, spread, leave_out=None, by=None):
     a, b = pos[src[:, None], anchors], pos[dst[:, None], anchors]  # (n, k, 3)
     both = np.isfinite(a[..., 0]) & np.isfinite(b[..., 0]) & (weight > 0)
     weight = np.where(both, weight, 0.0)
-    total = np.maximum(weight.sum(axis=1), 1e-300)[:, None]
-    a, b = np.nan_to_num(a), np.nan_to_num(b)
-    ca = (weight[..., None] * a).sum(axis=1) / total
-    cb = (weight[..., None] * b).sum(axis=1) / total
-    rotation, _ = best_rotation(np.sqrt(weight)[..., None] * (a - ca[:, None]),
-                                np.sqrt(weight)[..., None] * (b - cb[:, None]))
-    out = (rotation @ (pos[src, points] - ca)[..., None])[..., 0] + cb
+    weight /= np.maximum(weight.sum(axis=1), 1e-300)[:, None]
+    out = rigidly_carried(np.nan_to_num(a), np.nan_to_num(b), weight[..., None],
+                          pos[src, points])
     return np.where((both.sum(axis=1) >= 3)[:, None], out, np.nan)
 
 

@@ -81,6 +81,17 @@ def best_rotation(a, b, lean=0.0):
     return (u * fix[..., None, :]) @ vt, determined
 
 
+def rigidly_carried(ref, cur, weight, point, lean=0.0):
+    """Where the weighted rigid fit of the points ``ref`` onto ``cur`` (n, k, 3; ``weight``
+    (n, k, 1), each row summing to 1) carries ``point`` (n, 3): their weighted centroids matched
+    and the :func:`best_rotation` of the weighted offsets about them."""
+    c_ref = (ref * weight).sum(axis=1)
+    c_cur = (cur * weight).sum(axis=1)
+    rot, _ = best_rotation((ref - c_ref[:, None]) * np.sqrt(weight),
+                           (cur - c_cur[:, None]) * np.sqrt(weight), lean=lean)
+    return np.einsum("fij,fj->fi", rot, point - c_ref) + c_cur
+
+
 def order_bones(parents):
     """An order in which every parent comes before its children; GapFillError on a cycle."""
     parents = [int(p) for p in parents]
