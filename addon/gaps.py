@@ -1,7 +1,7 @@
 """Gap lists of takes and the fill, between the operators / batch command and the bridge.
 
-Everything here runs on the main thread except the ``work`` closure :func:`plan_fill` returns,
-which only sees arrays.
+Everything here runs on the main thread except the ``work`` closures :func:`plan_detect` and
+:func:`plan_fill` return, which only see arrays.
 """
 
 import os
@@ -60,23 +60,43 @@ def read_original(owner, scene):
 
 def detect(owner, scene, suspects=True, jump_factor=8.0):
     """Replace the detected gaps of a take (keeping gaps marked by hand); returns the take."""
+    take, work = plan_detect(owner, scene, suspects, jump_factor)
+    write_detected(owner, take, work(lambda fraction, message: None, None))
+    return take
+
+
+def plan_detect(owner, scene, suspects=True, jump_factor=8.0):
+    """Read a take; returns ``(take, work)``: ``work(progress, should_cancel)`` finds, on plain
+    arrays, its gaps, its suspect keys (jumps, stretched limbs) and on a marker set its label
+    swaps, spikes and ghosts, for :func:`write_detected`."""
     take = read_original(owner, scene)
     missing = bridge.unkeyed(take)
-    suspect = np.zeros_like(missing)
-    problems = []
-    if suspects:
+
+    def work(progress, should_cancel):
+        if not suspects:
+            return missing, np.zeros_like(missing), []
+        progress(0.0, "looking for keys that jump")
         motion = take.motion(bridge.missing_points(take, missing))
         flagged = find_suspects(motion.positions, motion.fps, motion.limbs,
                                 jump_factor=jump_factor)
+        problems = []
         if take.kind == "armature":
             flagged = bridge.blame_bones(take, flagged)
         else:  # label swaps, spikes and ghosts: listed as such, not as suspects
-            problems = find_faults(motion).faults
+            progress(0.2, "looking for label swaps, spikes and ghosts")
+            problems = find_faults(motion, should_cancel=should_cancel).faults
             for fault in problems:  # (the jump test flags a jump's neighbours too)
                 for name in fault.points:
                     flagged[max(fault.first - 1, 0):fault.last + 2,
                             motion.names.index(name)] = False
-        suspect = flagged & ~missing
+        return missing, flagged & ~missing, problems
+
+    return take, work
+
+
+def write_detected(owner, take, found):
+    """The gap list of ``owner`` made anew from what :func:`plan_detect`'s work ``found``."""
+    missing, suspect, problems = found
     settings = owner.mocap_gapfill
     marked = [(g.point, g.first, g.last, g.kind, g.filled, g.how, g.estimate, g.expected_mm)
               for g in settings.gaps if g.kind == "MARKED"]
@@ -94,7 +114,6 @@ def detect(owner, scene, suspects=True, jump_factor=8.0):
         gap.filled, gap.how, gap.estimate, gap.expected_mm = filled, how, estimate, expected
     settings.gap_index = -1 if not len(settings.gaps) else min(settings.gap_index, 0)
     update_stats(owner, take.points, take.first, take.positions.shape[0])
-    return take
 
 
 def _add_gap(settings, point, first, last, kind):

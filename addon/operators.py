@@ -159,27 +159,45 @@ class MOCAP_GAPFILL_OT_import_skeleton(bpy.types.Operator, ImportHelper):
         return {"FINISHED"}
 
 
-class MOCAP_GAPFILL_OT_detect_gaps(bpy.types.Operator):
+class MOCAP_GAPFILL_OT_detect_gaps(JobOperator, bpy.types.Operator):
     """Find the frames without keys in the selected takes, and keys that jump or stretch a limb"""
 
     bl_idname = "mocap_gapfill.detect_gaps"
     bl_label = "Detect Gaps"
     bl_options = {"REGISTER", "UNDO"}
 
-    poll = classmethod(_owner_poll)
+    @classmethod
+    def poll(cls, context):
+        if context.window_manager.mocap_gapfill.running:
+            cls.poll_message_set("A gap search or fill is running (Esc cancels it)")
+            return False
+        return _owner_poll(cls, context)
 
-    def execute(self, context):
-        scene_settings = context.scene.mocap_gapfill
+    def prepare(self, context):
+        settings = context.scene.mocap_gapfill
+        owners = gaps.takes_in(context)
+        plans = [(owner.name, *gaps.plan_detect(owner, context.scene, settings.detect_suspects,
+                                                settings.jump_factor)) for owner in owners]
+        self._takes = [(name, take) for name, take, _ in plans]
+
+        def work(progress, should_cancel):
+            found = []
+            for i, (name, _, find) in enumerate(plans):
+                found.append(find(lambda f, m, i=i: progress((i + f) / len(plans),
+                                                             f"{name}: {m}"), should_cancel))
+            return found
+
+        return work
+
+    def finish(self, context, results):
         total = problems = 0
-        try:
-            for owner in gaps.takes_in(context):
-                gaps.detect(owner, context.scene, scene_settings.detect_suspects,
-                            scene_settings.jump_factor)
-                found = [g.kind in gaps.REPAIRED for g in owner.mocap_gapfill.gaps]
-                total, problems = total + found.count(False), problems + sum(found)
-        except (GapFillError, ValueError) as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+        for (name, take), found in zip(self._takes, results):
+            owner = bpy.data.objects.get(name)
+            if owner is None:  # deleted while the search ran
+                continue
+            gaps.write_detected(owner, take, found)
+            kinds = [g.kind in gaps.REPAIRED for g in owner.mocap_gapfill.gaps]
+            total, problems = total + kinds.count(False), problems + sum(kinds)
         self.report({"INFO"}, f"{total} gaps found" + (
             f", and {problems} swaps, spikes or ghosts to repair first" if problems else ""))
         return {"FINISHED"}
@@ -336,7 +354,7 @@ class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         if context.window_manager.mocap_gapfill.running:
-            cls.poll_message_set("A fill is running")
+            cls.poll_message_set("A gap search or fill is running (Esc cancels it)")
             return False
         return True
 

@@ -119,22 +119,30 @@ def carried(pos, points, src, dst, partners, spread, leave_out=None, by=None):
     return np.where((both.sum(axis=1) >= 3)[:, None], out, np.nan)
 
 
-def find_faults(motion, config=None):
+def find_faults(motion, config=None, should_cancel=None):
     """The swaps, spikes and ghosts of a marker take (:class:`Fault` list, by first frame) and
-    the take repaired: :class:`Repair` (swaps exchanged back, spikes and ghosts cut)."""
+    the take repaired: :class:`Repair` (swaps exchanged back, spikes and ghosts cut).
+    ``should_cancel`` is asked between its stages (KeyboardInterrupt once it says so)."""
     config = config or FaultConfig.fitted()
+
+    def check():
+        if should_cancel and should_cancel():
+            raise KeyboardInterrupt
     pos = np.array(motion.positions, dtype=np.float64)
     changed = np.zeros(pos.shape[:2], dtype=bool)
     if motion.parents is not None or pos.shape[1] < 4 or len(pos) < 3:
         return Repair(pos, changed, [])  # a skeleton's joints cannot swap labels
     take = _Take(pos, config)
+    check()
     faults = []
     for i, j, a, b in take.swaps():
         pos[a:b + 1, [i, j]] = pos[a:b + 1, [j, i]]
         changed[a:b + 1, [i, j]] = True
         faults.append(Fault("swap", (motion.names[i], motion.names[j]), a, b))
     if faults:
+        check()
         take = _Take(pos, config, take.partners)
+    check()
     for p, a, b in take.departures():
         kind = "spike" if b - a + 1 <= config.max_spike else "ghost"
         pos[a:b + 1, p] = np.nan

@@ -291,17 +291,27 @@ def problems_step():
     lists them with their own icons, Repair All mends them, one Ctrl-Z undoes the repair."""
     state = STATE
     window, area = view3d()
+    wm = bpy.context.window_manager
     if state["step"] == 10:
         with bpy.context.temp_override(window=window, area=area):
             bpy.ops.mocap_gapfill.import_markers(filepath=f"{OUT}/06_01_faulty.npz")
             # the undo steps a user's clicks leave (a script's operator calls leave none)
             bpy.ops.ed.undo_push(message="Import C3D")
-            result = bpy.ops.mocap_gapfill.detect_gaps()
+            # as the button does: the search runs as a job, its progress in the panel
+            result = bpy.ops.mocap_gapfill.detect_gaps("INVOKE_DEFAULT")
+        say("detect invoked:", result)
+        state["step"] = 10.5
+        return 0.05
+    if state["step"] == 10.5:
+        if wm.mocap_gapfill.running:
+            say(f"progress {wm.mocap_gapfill.progress:.0f} % {wm.mocap_gapfill.message}")
+            return 0.05
+        with bpy.context.temp_override(window=window, area=area):
             bpy.ops.ed.undo_push(message="Detect Gaps")
         root = bpy.data.objects["06_01_faulty"]
         listed = list(root.mocap_gapfill.gaps)
-        say("problems listed:", result, [(g.kind, g.point, g.other, g.first, g.last)
-                                         for g in listed if g.kind in ("SWAP", "SPIKE", "GHOST")])
+        say("problems listed:", [(g.kind, g.point, g.other, g.first, g.last)
+                                 for g in listed if g.kind in ("SWAP", "SPIKE", "GHOST")])
         root.mocap_gapfill.gap_index = next(i for i, g in enumerate(listed) if g.kind == "SWAP")
         frame_markers(root, window, area, 230)
         state["step"] = 11

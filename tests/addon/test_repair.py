@@ -106,3 +106,29 @@ def test_a_blend_run_repairs_first(faulty, tmp_path):
     swap = np.zeros(take.keyed.shape, bool)
     swap[200:260, [take.points.index("LFHD"), take.points.index("RWRA")]] = True
     assert np.abs(take.positions[swap] * take.metres - truth.positions[swap]).max() < 1e-5
+
+
+def test_the_search_runs_as_a_cancellable_job(faulty):
+    """Detect Gaps looks for problems on plain arrays, as a job (a thread with progress in the
+    UI): cancelled, it leaves the gap list as it was."""
+    import importlib
+
+    import bpy
+
+    from test_workflow import LOCAL_MODULE
+
+    _, _, gaps, _ = modules()
+    jobs = importlib.import_module(f"{LOCAL_MODULE}.addon.jobs")
+    root, _, _ = faulty
+    assert issubclass(bpy.types.MOCAP_GAPFILL_OT_detect_gaps, jobs.JobOperator)
+    before = [(g.kind, g.point, g.first, g.last) for g in root.mocap_gapfill.gaps]
+    take, work = gaps.plan_detect(root, bpy.context.scene)
+    told = []
+    with pytest.raises(KeyboardInterrupt):
+        work(lambda fraction, message: told.append(message), lambda: True)
+    assert told == ["looking for keys that jump", "looking for label swaps, spikes and ghosts"]
+    assert [(g.kind, g.point, g.first, g.last) for g in root.mocap_gapfill.gaps] == before
+    found = work(lambda fraction, message: None, lambda: False)
+    gaps.write_detected(root, take, found)
+    assert sorted(g.kind for g in root.mocap_gapfill.gaps if g.kind in gaps.REPAIRED) == [
+        "SPIKE", "SWAP"]
