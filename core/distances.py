@@ -17,12 +17,8 @@ distance to the pair's own about the gap.
 
 import numpy as np
 
-#: sweeps over the pairs (docs/DESIGN.md)
-SWEEPS = 20
-
-
 def keep_distances(positions, missing, uncertainty, pairs, lengths, spreads=None,
-                   sweeps=SWEEPS, local=0.0, seen=1.0):
+                   sweeps=20, local=0.0, seen=1.0):
     """``positions`` with its ``missing`` samples moved so that the points of each pair of
     ``pairs`` lie ``lengths`` apart, as far as each pair's ``spreads`` lets it.
 

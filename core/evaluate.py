@@ -9,8 +9,8 @@ Protocols:
   ``l`` frames at random places (l in {3, 6, 12, 24} at the evaluation frame rate) until 5 % of
   the samples are gone;
 - ``endgaps``: the gaps takes start and end with (a marker not yet seen, or lost before the end):
-  a random ``ENDGAPS_RATE`` of the points lose their first ``l`` frames and as many others their
-  last ``l`` (l in {3, 12, 30, 60, 120} at the evaluation frame rate);
+  a random share (``GapProtocols.end_gaps_rate``) of the points lose their first ``l`` frames
+  and as many others their last ``l`` (l in {3, 12, 30, 60, 120} at the evaluation frame rate);
 - ``realgaps``: the gaps a real capture has (``gap_sources``: takes with gaps of their own, e.g.
   CMU 01_01.c3d), transplanted by point name onto the complete test take, the source's mask
   repeated in time where the test take is longer, so gap lengths and co-occurrence are real;
@@ -25,6 +25,7 @@ Errors are RMSE in millimetres over the missing entries and over all entries (th
 
 import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -37,16 +38,32 @@ from .motion import gap_runs
 from .io import read_motion, read_rig_take
 from .recover import KnnSettings
 
-JOINT_SETTINGS = [(m, l) for m in (3, 6) for l in (15, 30, 60, 90, 120)]
-MARKER_RATES = (0.1, 0.2, 0.3)
-SHORT_GAPS = (3, 6, 12, 24)
-SHORT_GAPS_RATE = 0.05
-END_GAPS = (3, 12, 30, 60, 120)
-ENDGAPS_RATE = 0.15
-BURSTS = (3, 12, 30, 60)
-#: frames per burst interval, and the least and most share of the points a burst takes
-BURST_EVERY = 120
-BURST_SHARE = (0.5, 1.0)
+
+
+@dataclass(frozen=True)
+class GapProtocols:
+    """The gaps each protocol punches (docs/EVALUATION.md): its settings and rates."""
+
+    #: ``joints``: (joints gone, frames) per setting
+    joints: tuple = tuple((m, l) for m in (3, 6) for l in (15, 30, 60, 90, 120))
+    #: ``markers``: the share of the markers gone per interval
+    marker_rates: tuple = (0.1, 0.2, 0.3)
+    #: ``shortgaps``: dropout lengths (frames), and the share of the samples they take
+    short_gaps: tuple = (3, 6, 12, 24)
+    short_gaps_rate: float = 0.05
+    #: ``endgaps``: lengths at the clip's ends, and the share of the points that lose them
+    end_gaps: tuple = (3, 12, 30, 60, 120)
+    end_gaps_rate: float = 0.15
+    #: ``bursts``: lengths, frames per burst interval, and the least and most share of the points
+    #: a burst takes
+    bursts: tuple = (3, 12, 30, 60)
+    burst_every: int = 120
+    burst_share: tuple = (0.5, 1.0)
+    #: ``bones``: (bones gapped, frames) per setting
+    bones: tuple = tuple((n, l) for n in (1, 3) for l in (15, 30, 60, 120, 240))
+
+
+PROTOCOLS = GapProtocols()
 BODY_PARTS = ("left_arm", "right_arm", "left_leg", "right_leg", "upper_body", "lower_body",
               "left_side", "right_side")
 _ARM = re.compile(r"(arm|hand|wrist|elbow|shoulder|sho|collar|clavicle|humerus|radius|finger|"
@@ -115,20 +132,21 @@ def punch_gaps(n_frames, n_points, protocol, setting, rng, names=None):
             raise GapFillError(f"no points of {setting} found by name")
         miss[n_frames // 4: 3 * n_frames // 4, pts] = True
     elif protocol == "shortgaps":
-        for _ in range(max(1, int(round(SHORT_GAPS_RATE * n_frames * n_points / setting)))):
+        share = PROTOCOLS.short_gaps_rate
+        for _ in range(max(1, int(round(share * n_frames * n_points / setting)))):
             s = rng.integers(1, n_frames - setting - 1)
             miss[s:s + setting, rng.integers(n_points)] = True
     elif protocol == "endgaps":
-        count = max(1, int(round(ENDGAPS_RATE * n_points)))
+        count = max(1, int(round(PROTOCOLS.end_gaps_rate * n_points)))
         points = rng.permutation(n_points)
         miss[:setting, points[:count]] = True
         miss[n_frames - setting:, points[count:2 * count]] = True
     elif protocol == "realgaps":
         miss = real_gaps(setting, names, n_frames)
     elif protocol == "bursts":
-        for s in range(0, n_frames - setting + 1, BURST_EVERY):
-            start = s + rng.integers(min(BURST_EVERY, n_frames - s) - setting + 1)
-            count = int(round(rng.uniform(*BURST_SHARE) * n_points))
+        for s in range(0, n_frames - setting + 1, PROTOCOLS.burst_every):
+            start = s + rng.integers(min(PROTOCOLS.burst_every, n_frames - s) - setting + 1)
+            count = int(round(rng.uniform(*PROTOCOLS.burst_share) * n_points))
             miss[start:start + setting, rng.choice(n_points, count, replace=False)] = True
     else:
         raise GapFillError(f"unknown protocol {protocol!r}")
@@ -153,17 +171,17 @@ def real_gaps(source, names, n_frames):
 
 def settings_of(protocol, gap_sources=()):
     if protocol == "joints":
-        return [(f"m={m},l={l}", (m, l)) for m, l in JOINT_SETTINGS]
+        return [(f"m={m},l={l}", (m, l)) for m, l in PROTOCOLS.joints]
     if protocol == "markers":
-        return [(f"rate={r}", r) for r in MARKER_RATES]
+        return [(f"rate={r}", r) for r in PROTOCOLS.marker_rates]
     if protocol == "bodyparts":
         return [(f"part={p}", p) for p in BODY_PARTS]
     if protocol == "shortgaps":
-        return [(f"l={l}", l) for l in SHORT_GAPS]
+        return [(f"l={l}", l) for l in PROTOCOLS.short_gaps]
     if protocol == "endgaps":
-        return [(f"l={l}", l) for l in END_GAPS]
+        return [(f"l={l}", l) for l in PROTOCOLS.end_gaps]
     if protocol == "bursts":
-        return [(f"l={l}", l) for l in BURSTS]
+        return [(f"l={l}", l) for l in PROTOCOLS.bursts]
     if protocol == "realgaps":
         if not gap_sources:
             raise GapFillError("protocol realgaps needs takes with real gaps (--gap-sources)")
@@ -293,7 +311,6 @@ def table(results):
 
 
 # ---- armatures: rotation gaps (protocol "bones") ------------------------------------------------
-BONE_SETTINGS = [(n, l) for n in (1, 3) for l in (15, 30, 60, 120, 240)]
 #: bones whose rotation places only small end joints are not gapped by the protocol
 _SMALL = re.compile(r"(thumb|index|mid|ring|pinky|finger|eye|toe|carpal|hand$|^[lr]hand)", re.I)
 
@@ -349,7 +366,7 @@ def evaluate_bones(tests, kb_sources, methods, kb_fps=60.0, seed=0, k=None, skip
 
     report = report or (lambda message: None)
     full_kb = _full_kb(kb_sources, kb_file, kb_fps, skip_frames, exclude, report)
-    chosen = [(f"n={n},l={l}", (n, l)) for n, l in BONE_SETTINGS
+    chosen = [(f"n={n},l={l}", (n, l)) for n, l in PROTOCOLS.bones
               if settings is None or f"n={n},l={l}" in settings]
     results = []
     total = len(tests) * len(chosen) * len(methods)

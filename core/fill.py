@@ -10,6 +10,8 @@ from .errors import GapFillError
 from .kb import match_names, starter_kb
 from .motion import gap_runs
 from .performers import bare, names_for_kb, performers
+from .matching import MatchSettings
+from .regression import RegressionSettings
 
 METHODS = ("knn", "auto", "linear", "spline", "local-spline", "rigid", "pattern", "svt", "pca",
            "intercorrelation")
@@ -160,12 +162,17 @@ class AutoConfig:
     ends_samples: int = 20
     #: the knowledge base's fill of the copies only weighs the methods: it fits fewer local models
     #: (at most this many a second), stops after fewer iterations than the fill of the gaps and
-    #: takes this query-noise factor (the one ``models.UNCHECKED_FACTOR`` uses where nothing can be
-    #: checked) instead of choosing one (same accuracy on the tuning takes, 0.8-0.9x the time:
-    #: docs/DESIGN.md)
+    #: takes this query-noise factor (the one ``KnnSettings.unchecked_factor`` uses where nothing
+    #: can be checked) instead of choosing one (same accuracy on the tuning takes, 0.8-0.9x the
+    #: time: docs/DESIGN.md)
     copies_model_fps: float = 15.0
     copies_iterations: int = 10
     copies_query_noise: float = 0.25
+    #: the take's own regressions (of a point on the rest of the body; a marker's place among its
+    #: partners)
+    regression: RegressionSettings = RegressionSettings()
+    #: the windows of the knowledge base's motion (and of the take's own) on long gaps
+    matching: MatchSettings = MatchSettings()
 
 
 @dataclass(frozen=True)
@@ -446,9 +453,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg
     # own regression and a partner's pattern stand in for it (without a knowledge base too)
     weight[[p for p in map(motion.names.index, lacking) if own[p] == 0]] = 0.0
     start = 0.5 if probe.any() else 0.0  # of the progress: the copies' fill came first
-    knn = _kb_estimate(motion, rigid, weight, kb, long, (windows, own, by_partner), seconds,
-                       settings, lambda f, m: progress(start + 0.5 * f, m), should_cancel,
-                       report, trace)
+    knn = _kb_estimate(motion, rigid, weight, kb, long, (windows, own, by_partner),
+                       (seconds, cfg.regression, cfg.matching), settings,
+                       lambda f, m: progress(start + 0.5 * f, m), should_cancel, report, trace)
     # the rigid donors' squared spread at each frame and on the mean of each point's copies
     spreads = _squared_spreads(probe, spread, copies_spread)
     harder = _harder_for_partners(*spreads)
@@ -511,7 +518,7 @@ class _Partners:
 
         return regress_in_frame(
             target.positions, lambda p: steady_partners(self.motion.positions, p, self.cache),
-            only, round(self.cfg.place_ends_seconds * self.motion.fps))
+            only, round(self.cfg.place_ends_seconds * self.motion.fps), self.cfg.regression)
 
 
 def _copies_refilled(hidden, motion, kb, probe, long, markers, partners, donors, settings,
@@ -536,11 +543,11 @@ def _copies_refilled(hidden, motion, kb, probe, long, markers, partners, donors,
         estimates = pool.submit(lambda: (carried(hidden) if probe.any() else (None, None),
                                          (placed(hidden, probe), placed(motion)) if markers
                                          else (None, None),
-                                         fill_match(hidden, kb, long,
-                                                    partners.stopped).positions
+                                         fill_match(hidden, kb, long, partners.stopped,
+                                                    cfg.matching).positions
                                          if long.any() and kb is not None else None,
                                          regress_points(hidden.positions, motion.names,
-                                                        probe & long[None])
+                                                        probe & long[None], cfg.regression)
                                          if long.any() else None,
                                          baselines.fill_pattern(hidden.positions,
                                                                 only=probe & long[None],
@@ -604,12 +611,14 @@ def _with_smooth_track(motion, out, probe, copies, weight, shares, harder, carri
     return out, eased, per_sample
 
 
-def _kb_estimate(motion, rigid, weight, kb, long, parts, seconds, settings, progress,
+def _kb_estimate(motion, rigid, weight, kb, long, parts, long_gaps, settings, progress,
                  should_cancel, report, trace):
     """The knowledge base's fill of the gaps (NaN without one), seeing the points the rigid
     partners carry alone (``weight`` 0) as observed (they are never another point's donors: an
     estimate carried on would add its error to the next); on ``long`` gaps joined by its
-    windows, the take's own regression and a partner's pattern at the shares ``parts``."""
+    windows, the take's own regression and a partner's pattern at the shares ``parts``
+    (``long_gaps``: the seconds that make a gap long, the regression's and the windows'
+    settings)."""
     from .recover import fill_knn
 
     ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
@@ -619,32 +628,36 @@ def _kb_estimate(motion, rigid, weight, kb, long, parts, seconds, settings, prog
         given, kb, settings, progress=progress, should_cancel=should_cancel,
         report=report).positions
     if long.any():
-        knn = _with_long_gap_estimates(knn, given, motion.missing, kb, long, parts, seconds,
+        knn = _with_long_gap_estimates(knn, given, motion.missing, kb, long, parts, long_gaps,
                                        should_cancel, trace)
     return knn
 
 
-def _with_long_gap_estimates(knn, given, missing, kb, long, parts, seconds, should_cancel,
+def _with_long_gap_estimates(knn, given, missing, kb, long, parts, long_gaps, should_cancel,
                              trace):
     """The knowledge base's estimate ``knn`` of the points with ``long`` gaps joined, at the
     shares ``parts`` (per point), by its windows of motion, the take's own regression on the
     rest of the body and a partner's pattern, each made on the take as the knowledge base sees
-    it (``given``: the points rigid partners carry alone included) for its gaps (``missing``)."""
+    it (``given``: the points rigid partners carry alone included) for its gaps (``missing``;
+    ``long_gaps``: the seconds that make a gap long, the regression's and the windows'
+    settings)."""
     from .matching import fill_match
     from .regression import regress_points
 
     windows, own, by_partner = parts
+    seconds, regression, matching = long_gaps
     if (windows > 0).any():
         # matched as on the copies, over every point with long gaps (the stretches and the
         # take's own windows a point gets depend on which others are matched with it)
-        knn = _mix_in(knn, fill_match(given, kb, long, should_cancel).positions, windows)
+        knn = _mix_in(knn, fill_match(given, kb, long, should_cancel, matching).positions,
+                      windows)
         trace(f"auto: windows of the knowledge base's motion join its models on "
                f"{int((windows > 0).sum())} points with gaps of {seconds:g} s or more")
     if (own > 0).any():
         # on the rest of the body as the knowledge base sees it (the points rigid partners carry
         # alone included), as the copies' regression saw it
         knn = _mix_in(knn, regress_points(given.positions, given.names,
-                                          missing & (own > 0)[None]), own)
+                                          missing & (own > 0)[None], regression), own)
         trace(f"auto: the take's own regression on the rest of the body joins on "
                f"{int((own > 0).sum())} points with gaps of {seconds:g} s or more")
     if (by_partner > 0).any():

@@ -11,23 +11,43 @@ smooth because each window is real motion. The armature fill matches bone rotati
 ``auto``'s points with long gaps (:mod:`.fill`).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .kb import match_names
 from .motion import blend_into_gaps, gap_runs, interpolate_rows, widened
 from .normalize import denormalize, frames_of, normalize, reference_template
 
-#: playback speeds of the knowledge base tried against the take
-SPEEDS = (0.8, 0.9, 1.0, 1.12, 1.25)
-#: windows averaged per stretch
-TOP = 5
-#: ``lean``: the best windows, near copies of each other included, whose distinct ones make the
-#: second set (tuned, docs/DESIGN.md)
-LEAN = 10
+
+@dataclass(frozen=True)
+class MatchSettings:
+    """Motion matching's settings (tuned on non-test takes, docs/DESIGN.md)."""
+
+    #: playback speeds of the knowledge base tried against the take
+    speeds: tuple = (0.8, 0.9, 1.0, 1.12, 1.25)
+    #: windows averaged per stretch
+    top: int = 5
+    #: ``lean``: the best windows, near copies of each other included, whose distinct ones make
+    #: the second set
+    lean: int = 10
+    #: :func:`fill_match`: seconds of context either side of a gap, of the pieces matched, and
+    #: of the chunks a long stretch is matched in (overlapping by a piece, cross-faded: memory
+    #: stays bounded)
+    context: float = 0.5
+    piece: float = 1.0
+    chunk: float = 4.0
+    #: the knowledge base's poses are matched at most this many a second (a second of motion is
+    #: seen well at 30 poses; the cost grows with the square of the rate)
+    fps: float = 30.0
+    #: the take itself is searched beside the knowledge base wherever it shows the points a
+    #: stretch lacks (the same subject and style; the armatures' ``BoneConfig.match_own``)
+    own: bool = True
 
 
 def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretches,
-                  speeds=SPEEDS, top=TOP, width=None, on_stretch=None, kb_hidden=None,
+                  speeds=MatchSettings.speeds, top=MatchSettings.top, width=None, on_stretch=None,
+                  kb_hidden=None,
                   needs=None, table=None, lean=False):
     """Per stretch ``(lo, hi)`` of take frames: the mean, over the ``top`` best windows of the
     knowledge base, of their features at each frame lo..hi (an array (hi - lo + 1, items, d)),
@@ -45,10 +65,10 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
     it may raise to stop). ``table``: :func:`pose_table` of ``kb_features``, where the caller
     keeps it between calls. ``lean``: per piece, the mean of the ``top`` best windows is
-    averaged, in equal parts, with the mean of the distinct ones among the :data:`LEAN` best,
-    near copies of each other included (a window one pose or one speed off the best costs
-    little more where the motion is smooth): where one window stands out, its near copies
-    crowd the others out of the second set, and the mean leans to it.
+    averaged, in equal parts, with the mean of the distinct ones among the ``lean`` best (True:
+    ``MatchSettings.lean``), near copies of each other included (a window one pose or one speed
+    off the best costs little more where the motion is smooth): where one window stands out,
+    its near copies crowd the others out of the second set, and the mean leans to it.
     """
     if not stretches:  # the table below costs a pass over the whole knowledge base
         return []
@@ -105,7 +125,8 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
             if not sets[0]:
                 continue
             if lean:
-                sets.append(_distinct(candidates[:LEAN], top, kb_source))
+                most = MatchSettings.lean if lean is True else lean
+                sets.append(_distinct(candidates[:most], top, kb_source))
             taper = np.clip(1 - np.abs(frames - centre) / max(half, 1e-9), 0, 1)
             taper[(frames < centre) & (piece == 0)] = 1.0
             taper[(frames > centre) & (piece == len(centres) - 1)] = 1.0
@@ -205,33 +226,20 @@ def _diagonal_sums(q, w, table, rows):
     return out
 
 
-#: seconds of context either side of a gap, of the pieces matched, and of the chunks a long
-#: stretch is matched in (overlapping by a piece, cross-faded: memory stays bounded)
-POSE_CONTEXT = 0.5
-POSE_PIECE = 1.0
-POSE_CHUNK = 4.0
-#: the knowledge base's poses are matched at most this many a second (a second of motion is
-#: seen well at 30 poses; the cost grows with the square of the rate)
-POSE_FPS = 30.0
-#: the take itself is searched beside the knowledge base wherever it shows the points a
-#: stretch lacks (the same subject and style; the armatures' ``BoneConfig.match_own``)
-POSE_OWN = True
-
-
-def fill_match(motion, kb, points=None, should_cancel=None):
+def fill_match(motion, kb, points=None, should_cancel=None, settings=MatchSettings()):
     """Motion matching in position space: each stretch of frames with ``points`` missing
     ((points,) bool, default all; the other gaps stay as they are) and
-    :data:`POSE_CONTEXT` either side) takes the mean of the knowledge-base windows whose poses,
+    ``settings.context`` either side) takes the mean of the knowledge-base windows whose poses,
     normalised as the knowledge base's are, move most like the take's present points
-    (:func:`match_windows`, pieces of :data:`POSE_PIECE`; the take's own windows too wherever
-    they show the points the stretch lacks: :data:`POSE_OWN`), each gap offset to meet the
+    (:func:`match_windows`, pieces of ``settings.piece``; the take's own windows too wherever
+    they show the points the stretch lacks: ``settings.own``), each gap offset to meet the
     observations at its ends. A whole limb gone for seconds takes real motion of a body that
     moved like this one; where few points are missing the per-frame models of ``knn`` fit the
     pose better. The motion with those gaps filled (NaN where no window matched).
     """
     common, _ = match_names(kb, motion.names)
     q = [motion.names.index(n) for n in common]
-    stride = max(1, int(round(kb.fps / POSE_FPS)))
+    stride = max(1, int(round(kb.fps / settings.fps)))
     kb_poses = kb.poses[::stride, [kb.names.index(n) for n in common]]
     reference = kb.reference_for(common)
     pos = motion.positions[:, q]
@@ -240,7 +248,8 @@ def fill_match(motion, kb, points=None, should_cancel=None):
     root, angle = frames_of(pos, reference, reference_template(kb_poses, reference))
     features = np.nan_to_num(normalize(pos, root, angle))
     fps, frames = motion.fps, len(pos)
-    margin, chunk, over = (int(round(s * fps)) for s in (POSE_CONTEXT, POSE_CHUNK, POSE_PIECE))
+    margin, chunk, over = (int(round(s * fps)) for s in (settings.context, settings.chunk,
+                                                           settings.piece))
     stretches, joins, needs = [], [], []
     for _, a, e in gap_runs(wanted.any(axis=1)[:, None]):
         lo, hi = max(0, a - margin), min(frames - 1, e + margin)
@@ -254,7 +263,7 @@ def fill_match(motion, kb, points=None, should_cancel=None):
                 break
             lo = last - over + 1
     source, hidden = kb.source_index[::stride], None
-    if POSE_OWN:
+    if settings.own:
         # the take at the knowledge base's pose rate, its other gaps interpolated; a window
         # of it counts only where it shows every point the stretch lacks
         seen = np.stack([interpolate_rows(features[:, i], ~missing[:, i])
@@ -262,7 +271,7 @@ def fill_match(motion, kb, points=None, should_cancel=None):
         own, source, hidden = take_as_source(seen, missing, fps, kb.fps / stride, source)
         kb_poses = np.concatenate([kb_poses, own])
     found = match_windows(features, (~missing).astype(float), kb_poses, source, fps,
-                          kb.fps / stride, stretches, width=POSE_PIECE,
+                          kb.fps / stride, stretches, width=settings.piece,
                           on_stretch=_cancel_check(should_cancel), kb_hidden=hidden,
                           needs=needs)
     total, share = np.zeros(pos.shape), np.zeros(frames)

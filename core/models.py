@@ -44,7 +44,7 @@ class KnnSettings:
     min_present: int = 3
     #: raise each frame's model noise to ``query_noise * missing share * (mean squared distance
     #: per coordinate from the query to its median neighbour)``; "auto" picks the factor among
-    #: NOISE_FACTORS per fill by hiding present points and predicting them (0: the paper)
+    #: ``noise_factors`` per fill by hiding present points and predicting them (0: the paper)
     query_noise: object = "auto"
     max_iterations: int = 20
     batch_frames: int = 256
@@ -58,24 +58,25 @@ class KnnSettings:
     #: where the root or hips were in a gap, normalise again with their fill and model again the
     #: frames whose normalisation moved (``auto``'s refill of its copies does without)
     renormalise: bool = True
+    #: ... the frames whose root moved more than this (m) or whose facing turned more than this
+    #: (degrees) once the hips are filled
+    change_root: float = 0.01
+    change_degrees: float = 1.0
+    #: neighbours per frame when ``k`` is None
+    default_k: int = 4096
+    #: subspace iteration of the local PCA: extra columns and power iterations
+    oversample: int = 8
+    power_iterations: int = 1
+    #: the query-noise factors "auto" chooses from, how many frames it checks, and the factor
+    #: used where no frame shows the points some gap hides (then nothing can be checked)
+    noise_factors: tuple = (0.0, 0.125, 0.25, 0.5, 1.0)
+    calibration_frames: int = 192
+    unchecked_factor: float = 0.25
     #: where the search and the local models' products run: "auto" (torch on a CUDA GPU, else
     #: torch on the CPU, else numpy when torch is absent), "numpy", "cpu" or "cuda" (torch)
     device: str = "auto"
     random_state: int = 0
 
-
-#: neighbours per frame when KnnSettings.k is None
-DEFAULT_K = 4096
-#: subspace iteration of the local PCA: extra columns and power iterations
-OVERSAMPLE = 8
-POWER_ITERATIONS = 1
-
-
-#: the query-noise factors "auto" chooses from, how many frames it checks, and the factor used
-#: where no frame shows the points some gap hides (then nothing can be checked)
-NOISE_FACTORS = (0.0, 0.125, 0.25, 0.5, 1.0)
-CALIBRATION_FRAMES = 192
-UNCHECKED_FACTOR = 0.25
 
 def local_pca(neighbours, settings, rng, backend):
     """Top principal components of each frame's neighbours (batched subspace iteration).
@@ -93,9 +94,9 @@ def local_pca(neighbours, settings, rng, backend):
     cov = backend.gram(neighbours) / np.float32(max(1, k - 1))
     total = np.trace(cov, axis1=1, axis2=2, dtype=np.float64)
     r = min(settings.max_components, d, k - 1)
-    start = rng.standard_normal((d, min(d, r + OVERSAMPLE))).astype(cov.dtype)
+    start = rng.standard_normal((d, min(d, r + settings.oversample))).astype(cov.dtype)
     y = (cov.reshape(-1, d) @ start).reshape(t, d, -1)  # one product: the start is shared
-    for _ in range(POWER_ITERATIONS):
+    for _ in range(settings.power_iterations):
         y = cov @ _orthonormal(y)
     basis = _orthonormal(y)  # (t, d, r+8)
     small = basis.transpose(0, 2, 1) @ (cov @ basis)
@@ -139,9 +140,10 @@ def fit_models(index, queries, mask, settings, rng):
 
 def kb_index(kb, common, settings):
     """The search index over the knowledge base's ``common`` points (no copy when they are all
-    of its points, in order) and the settings with K resolved (None: DEFAULT_K or the KB size)."""
+    of its points, in order) and the settings with K resolved (None: ``default_k`` or the KB
+    size)."""
     if settings.k is None:
-        settings = replace(settings, k=min(DEFAULT_K, kb.size))
+        settings = replace(settings, k=min(settings.default_k, kb.size))
     elif settings.k > kb.size:
         raise GapFillError(f"K = {settings.k} is larger than the knowledge base ({kb.size} poses)")
     cols = [kb.names.index(n) for n in common]
@@ -165,13 +167,14 @@ def model_sources(frames, model, fps, model_fps):
 
 
 def noise_factor(obs_norm, model, frames, index, settings, rng):
-    """The query-noise factor (of NOISE_FACTORS) that best recovers known points hidden the way
-    the gaps hide points: frames are drawn where the points missing in some modelled frame are
-    all present, those points are hidden, the frames are searched and modelled as in a fill,
-    and each factor's closed-form prediction of the hidden points is scored."""
+    """The query-noise factor (of ``settings.noise_factors``) that best recovers known points
+    hidden the way the gaps hide points: frames are drawn where the points missing in some
+    modelled frame are all present, those points are hidden, the frames are searched and
+    modelled as in a fill, and each factor's closed-form prediction of the hidden points is
+    scored."""
     patterns, counts = np.unique(model[frames], axis=0, return_counts=True)
     order = rng.permutation(len(patterns))[:16]
-    budget = min(CALIBRATION_FRAMES, len(frames))
+    budget = min(settings.calibration_frames, len(frames))
     share = counts[order] / counts[order].sum()
     rows, hidden = [], []
     for pattern, part in zip(patterns[order], share):
@@ -183,18 +186,18 @@ def noise_factor(obs_norm, model, frames, index, settings, rng):
             rows.extend(rng.choice(candidates, take, replace=False))
             hidden.extend([pattern] * take)
     if not rows:
-        return UNCHECKED_FACTOR
+        return settings.unchecked_factor
     rows, hidden = np.array(rows), np.array(hidden)
     mask = model[rows] | hidden
     means, comps, lams, noise, spread = fit_models(index, obs_norm[rows], mask, settings, rng)
     obs = np.nan_to_num(obs_norm[rows])
     normal = normal_equations(mask, obs, means, comps)
     errors = []
-    for factor in NOISE_FACTORS:
+    for factor in settings.noise_factors:
         h = closed_form(normal, lams, np.maximum(noise, factor * spread), settings)
         pose = model_poses(means, comps, h).reshape(obs.shape)
         errors.append(float(((pose - obs) ** 2)[hidden].sum()))
-    return NOISE_FACTORS[int(np.argmin(errors))]
+    return settings.noise_factors[int(np.argmin(errors))]
 
 
 def soft_poses(positions, names, uncertainty, kb, fps, settings=KnnSettings(), frames=None,

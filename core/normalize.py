@@ -33,11 +33,6 @@ _SHOULDERS = [(["lclavicle"], ["rclavicle"]), (["leftshoulder"], ["rightshoulder
               (["lcollar"], ["rcollar"]), (["lsho"], ["rsho"])]
 
 
-#: frames showing every reference point that :func:`frames_of` needs to take the take's own
-#: template of them (fewer: the knowledge base's)
-OWN_TEMPLATE_FRAMES = 5
-
-
 @dataclass(frozen=True)
 class Reference:
     """Indices of the points that define a pose's root and facing."""
@@ -90,12 +85,12 @@ def find_reference(names):
         f"among {', '.join(names[:12])}{'...' if len(names) > 12 else ''}")
 
 
-def frames_of(positions, reference, template=None):
+def frames_of(positions, reference, template=None, own_frames=5):
     """Per-frame root (frames, 3) and facing angle (frames,) of a motion, robust to gaps.
 
     Where some reference points are missing, a template of them (their median normalised
     positions over the frames that show them all, or, in fewer than
-    :data:`OWN_TEMPLATE_FRAMES` frames, ``template``: e.g. a knowledge base's median pose) is
+    ``own_frames`` frames, ``template``: e.g. a knowledge base's median pose) is
     fitted rigidly (turn about Z, shift) to those present in each frame that shows at least two.
     Where fewer are seen, the root is carried rigidly from the nearest frames on either side that
     have it (a 2-D Kabsch fit of the points present in both), and the facing follows the present
@@ -107,7 +102,7 @@ def frames_of(positions, reference, template=None):
     root = pos[:, list(reference.root)].mean(axis=1)
     angle = _line_angle(pos, reference.left, reference.right)
     known = np.isfinite(root).all(axis=1) & np.isfinite(angle)
-    if known.sum() >= OWN_TEMPLATE_FRAMES:  # the take's own: its markers sit where they sit
+    if known.sum() >= own_frames:  # the take's own: its markers sit where they sit
         template = reference_template(normalize(pos[known], root[known], angle[known]),
                                       reference)
     if template is not None:  # frames that show some of the reference points

@@ -40,12 +40,6 @@ from .models import KnnSettings, fit_models, kb_index, model_sources, noise_fact
 from .motion import blend_into_gaps, widened
 from .normalize import denormalize, frames_of, normalize, reference_points, reference_template
 
-#: a second pass models and optimises again the frames whose root moved more than this (m) or
-#: whose facing turned more than this (rad) once the hips are filled
-CHANGE_ROOT = 0.01
-CHANGE_ANGLE = np.deg2rad(1.0)
-
-
 def pieces(n_frames, size, overlap):
     """The (start, stop) frame ranges a take is filled in: one range when it holds at most
     ``size + overlap`` frames, else ranges of at most that length, each sharing ``overlap``
@@ -143,8 +137,8 @@ def _fill_piece(motion, kb, settings, progress, should_cancel, report):
         # model and optimise again the frames whose normalisation changed
         root2, angle2 = frames_of(filled_pos, reference, template)
         turn = np.abs(np.angle(np.exp(1j * (angle2 - angle))))  # unwrapped apart by 2 pi: same
-        cache["changed"] = ((np.linalg.norm(root2 - root, axis=1) > CHANGE_ROOT)
-                            | (turn > CHANGE_ANGLE))
+        cache["changed"] = ((np.linalg.norm(root2 - root, axis=1) > settings.change_root)
+                            | (turn > np.deg2rad(settings.change_degrees)))
         if cache["changed"].any():
             filled_pos = _fill_pass(pos, masks, root2, angle2, index, limbs, lengths, motion.fps,
                                     settings, progress, should_cancel, cache, 0.6, 1.0)

@@ -711,13 +711,8 @@ def _quat(v):
     return np.concatenate([v * half, np.cos(angle / 2)], axis=-1)
 
 
-#: at a clip end, the take's own regression of a bone stays within its channels' range over the
-#: training frames, widened by this share of it on each side (as the points' regression,
-#: :data:`~.regression.MARGIN`): a take that ends standing still is not the walk it learnt from
-ONE_SIDED_MARGIN = 0.1
-
-
-def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=False):
+def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=False,
+                     end_margin=0.1):
     """Like :func:`interpolate_channels`, but each gap with a key on a side takes what the
     rest of the body says of the bone: a ridge regression of its channels on the channels of
     every bone keyed throughout the gap (at the frame and ``lags`` seconds either side, so the
@@ -725,7 +720,8 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=
     seconds of the gap where the bone and all of those are keyed; the regression's miss at the
     keys either side is interpolated across the gap, so the fill meets both keys (at a clip end
     the miss at the one key is carried, and the prediction kept within the training frames'
-    range widened by :data:`ONE_SIDED_MARGIN` of it on each side). ``ridge``:
+    range widened by ``end_margin`` of it on each side, as the points' regression: a take that
+    ends standing still is not the walk it learnt from). ``ridge``:
     the penalty per training frame on standardised channels. ``fixed`` ((bones,) bool): bones
     left as interpolated (roots). A gap with too few training frames stays linear. ``kernel``:
     a Gaussian kernel (bandwidth: the median squared distance between training frames, scaled to
@@ -759,7 +755,7 @@ def regress_channels(values, gaps, fps, lags, window, ridge, fixed=None, kernel=
                                 ridge) + centre
             ends = np.array([t for t in (a - 1, e + 1) if 0 <= t < frames])
             if len(ends) == 1:  # no second key to pull it back: within what training saw
-                pred = within_fitted(pred, y[train], ONE_SIDED_MARGIN)
+                pred = within_fitted(pred, y[train], end_margin)
             miss = y - pred  # known at the keys beside the gap
             span = np.arange(a, e + 1)
             for k in range(width):

@@ -6,18 +6,15 @@ per point. All three terms come out of one matrix product against ``[k, per-poin
 every frame may have its own mask and the work is one blocked GEMM (float32), bounded in memory.
 The K best are chosen exactly: a threshold from a sample of each row keeps the candidates (a row
 whose threshold keeps too few falls back to a full partition), and the final order is decided on
-K + MARGIN candidates by direct differences (float32 differences, float64 sums), so results equal
-the brute-force float64 oracle (:func:`knn_oracle`) up to ties and float32 rounding of the data.
+K + ``KBIndex.margin`` candidates by direct differences (float32 differences, float64 sums), so
+results equal the brute-force float64 oracle (:func:`knn_oracle`) up to ties and float32 rounding
+of the data.
 """
 
 import numpy as np
 
 from .backend import resolve
 from .errors import GapFillError
-
-#: extra candidates re-ranked in float64 beyond K, absorbing float32 rounding
-MARGIN = 16
-
 
 class KBIndex:
     """A knowledge base prepared for masked search.
@@ -29,6 +26,9 @@ class KBIndex:
     device : str
         Where the distance products run (:data:`~mocap_gapfill.core.backend.DEVICES`).
     """
+
+    #: extra candidates re-ranked in float64 beyond K, absorbing float32 rounding
+    margin = 16
 
     def __init__(self, poses, device="auto"):
         poses = np.asarray(poses)
@@ -105,7 +105,7 @@ class KBIndex:
             sel = slice(start, start + rows)
             # the smallest of lhs @ [k, |k_i|^2]^T: squared distances minus |q|^2
             if ordered:
-                cand, _ = self.backend.smallest(lhs[sel], min(self.n, k + MARGIN))
+                cand, _ = self.backend.smallest(lhs[sel], min(self.n, k + self.margin))
                 # direct differences on the candidates (no cancellation), then the K in order
                 diff = self._flat[cand] - q[sel].reshape(len(cand), 1, -1)
                 diff *= np.repeat(present[sel], 3, axis=1)[:, None, :]

@@ -494,7 +494,7 @@ def test_auto_short_copies_do_not_vouch_for_rigid_partners_past_their_spread(daz
     assert floor < 0.75 * rmse_mm(fill(query, "rigid"), take, miss)
 
 
-def test_auto_windows_of_motion_carry_a_limb_gone_for_seconds(daz_kb, walk, monkeypatch):
+def test_auto_windows_of_motion_carry_a_limb_gone_for_seconds(daz_kb, walk):
     """07_05 (a walk, subject out of the KB) with its left leg gone for 2.1 s (the `bodyparts`
     protocol): per frame the rest of the body says little of where the leg is in its stride;
     windows of the knowledge base's motion matched on the rest of the body over time do
@@ -517,8 +517,7 @@ def test_auto_windows_of_motion_carry_a_limb_gone_for_seconds(daz_kb, walk, monk
               "auto": rmse_mm(fill(query, "auto", kb=kb), walk, miss)}
     scores["auto without windows"] = rmse_mm(fill(query, "auto", kb=kb, config=AutoConfig(
         match_seconds=np.inf)), walk, miss)
-    monkeypatch.setattr(matching, "POSE_CHUNK", 2.0)
-    chunked = fill_match(query, kb)
+    chunked = fill_match(query, kb, settings=matching.MatchSettings(chunk=2.0))
     scores["match in 2 s chunks"] = rmse_mm(chunked, walk, miss)
     print(scores)
     assert scores["match"] < 0.8 * scores["knn"]
@@ -531,8 +530,7 @@ def test_auto_windows_of_motion_carry_a_limb_gone_for_seconds(daz_kb, walk, monk
         fill_match(query, kb, should_cancel=lambda: True)
 
 
-def test_windows_of_the_take_itself_carry_a_limb_gone_for_seconds(daz_kb, data_dir,
-                                                                 monkeypatch):
+def test_windows_of_the_take_itself_carry_a_limb_gone_for_seconds(daz_kb, data_dir):
     """06_11 (9.5 s at 60 fps, subject out of the KB) with its left arm gone for the middle half
     (the `bodyparts` protocol): the take shows the same arm of the same subject in its first and
     last quarters, moving against a body that moves as it does in the gap; the knowledge base
@@ -550,9 +548,10 @@ def test_windows_of_the_take_itself_carry_a_limb_gone_for_seconds(daz_kb, data_d
     query = with_gaps(take, miss)
     scores = {"match": rmse_mm(fill_match(query, kb), take, miss),
               "auto": rmse_mm(fill(query, "auto", kb=kb), take, miss)}
-    monkeypatch.setattr(matching, "POSE_OWN", False)
-    scores["match, KB only"] = rmse_mm(fill_match(query, kb), take, miss)
-    scores["auto, KB only"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
+    kb_only = matching.MatchSettings(own=False)
+    scores["match, KB only"] = rmse_mm(fill_match(query, kb, settings=kb_only), take, miss)
+    scores["auto, KB only"] = rmse_mm(fill(query, "auto", kb=kb,
+                                           config=AutoConfig(matching=kb_only)), take, miss)
     print(scores)
     assert scores["match"] < 0.75 * scores["match, KB only"]
     assert scores["auto"] < 0.85 * scores["auto, KB only"]
@@ -584,8 +583,7 @@ def test_a_partners_pattern_carries_a_leg_that_follows_the_other(daz_kb, data_di
                for a in accounts)
 
 
-def test_auto_the_takes_own_regression_carries_an_arm_gone_for_seconds(daz_kb, walk,
-                                                                      monkeypatch):
+def test_auto_the_takes_own_regression_carries_an_arm_gone_for_seconds(daz_kb, walk):
     """07_05 (a walk, subject out of the KB) with its left arm gone for 2.1 s (the `bodyparts`
     protocol): the take's own frames where the arm is seen say how it swings against the rest
     of the body, which no knowledge base of other subjects does. Measured when written (mm):
@@ -608,11 +606,12 @@ def test_auto_the_takes_own_regression_carries_an_arm_gone_for_seconds(daz_kb, w
     scores = {"own": rmse_mm(query.replace(positions=own), walk, miss),
               **{m: rmse_mm(fill(query, m, kb=kb), walk, miss)
                  for m in ("auto", "rigid", "pattern")}}
-    monkeypatch.setattr(regression, "KERNEL", 0.0)  # the linear regression alone
+    linear = regression.RegressionSettings(kernel=0.0)  # the linear regression alone
     scores["own, linear"] = rmse_mm(query.replace(positions=regression.regress_points(
-        query.positions, query.names)), walk, miss)
-    monkeypatch.setattr(regression, "LEAST", 10 ** 9)  # no gap has that many training frames
-    scores["auto without"] = rmse_mm(fill(query, "auto", kb=kb), walk, miss)
+        query.positions, query.names, settings=linear)), walk, miss)
+    never = AutoConfig(regression=regression.RegressionSettings(least=10 ** 9))  # no gap has
+    # that many training frames
+    scores["auto without"] = rmse_mm(fill(query, "auto", kb=kb, config=never), walk, miss)
     print(scores)
     assert scores["own"] < 0.9 * scores["own, linear"]
     assert scores["auto"] < 0.75 * scores["auto without"]
@@ -672,8 +671,7 @@ def test_a_markers_place_among_its_partners_regressed_beats_the_rigid_fill(data_
     assert on_filled(placed) < 0.5 * on_filled(rigid)
 
 
-def test_auto_joins_a_markers_place_among_its_partners_to_the_rigid_estimate(data_dir,
-                                                                            monkeypatch):
+def test_auto_joins_a_markers_place_among_its_partners_to_the_rigid_estimate(data_dir):
     """On a marker set the place among the rigid partners, regressed, joins the rigid
     estimate by its error on the copies (it fills only interior gaps whose partners it finds).
     Tuning take 02_05 at 60 fps, 20 % of the markers gone per second, KB of 06_01 and 135_02.
@@ -686,9 +684,8 @@ def test_auto_joins_a_markers_place_among_its_partners_to_the_rigid_estimate(dat
     scores = {"auto": rmse_mm(fill(query, "auto", kb=kb, report=lines.append,
                                    trace=lines.append), take, miss)}
     assert any("place among its rigid partners" in line for line in lines)
-    monkeypatch.setattr(regression, "regress_in_frame",
-                        lambda positions, *rest: np.full(np.shape(positions), np.nan))
-    scores["auto without"] = rmse_mm(fill(query, "auto", kb=kb), take, miss)
+    never = AutoConfig(regression=regression.RegressionSettings(frame_least_features=10 ** 9))
+    scores["auto without"] = rmse_mm(fill(query, "auto", kb=kb, config=never), take, miss)
     print(scores)
     assert scores["auto"] < 0.85 * scores["auto without"]
 

@@ -79,7 +79,7 @@ def stage_fill(repeat, k=None, device="auto", method="knn"):
     from mocap_gapfill.core.fill import fill
     from mocap_gapfill.core.io import read_motion
     from mocap_gapfill.core.kb import build_kb
-    from mocap_gapfill.core.models import DEFAULT_K, KnnSettings
+    from mocap_gapfill.core.models import KnnSettings
 
     t = time.perf_counter()
     kb = build_kb([DAZ], skip_frames=6, exclude=["13_30.bvh.gz"])
@@ -92,7 +92,7 @@ def stage_fill(repeat, k=None, device="auto", method="knn"):
         t = time.perf_counter()
         out = fill(query, method, kb=kb, settings=KnnSettings(k=k, device=device))
         times.append(time.perf_counter() - t)
-    return {"kb_size": kb.size, "frames": 2048, "fps": take.fps, "k": k or f"default ({DEFAULT_K})",
+    return {"kb_size": kb.size, "frames": 2048, "fps": take.fps, "k": k or f"default ({KnnSettings.default_k})",
             "device": device, "method": method,
             "kb_build_s": build, "fill_median_s": statistics.median(times),
             "rmse_missing_mm": rmse_mm(out, take, miss)}

@@ -27,7 +27,7 @@ from collections import defaultdict
 import numpy as np
 
 from mocap_gapfill.core.bonefill import fill_bones, halfway
-from mocap_gapfill.core.evaluate import (BONE_SETTINGS, bone_errors, kb_without, punch_bone_gaps,
+from mocap_gapfill.core.evaluate import (PROTOCOLS, bone_errors, kb_without, punch_bone_gaps,
                                          subject_of)
 from mocap_gapfill.core.io import read_rig_take
 from mocap_gapfill.core.motion import gap_runs
@@ -76,7 +76,7 @@ def run(out):
             truth = basis_matrices(rig, channels, location)
             below = rig.placed_by()
             frames = len(channels)
-            for n, l in BONE_SETTINGS:
+            for n, l in PROTOCOLS.bones:
                 gaps = punch_bone_gaps(rig, frames, (n, l), ends=True)
                 runs = gap_runs(gaps)
                 real = gap_errors(rig, fills_of(rig, channels, location, gaps, fps, kb), truth,

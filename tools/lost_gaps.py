@@ -34,7 +34,7 @@ from collections import Counter, defaultdict
 import numpy as np
 
 from mocap_gapfill.core.bonefill import BONE_METHODS, BoneConfig, fill_bones, gap_copies
-from mocap_gapfill.core.evaluate import (BONE_SETTINGS, kb_without, punch_bone_gaps,
+from mocap_gapfill.core.evaluate import (PROTOCOLS, kb_without, punch_bone_gaps,
                                          subject_of)
 from mocap_gapfill.core.io import read_rig_take
 from mocap_gapfill.core.motion import gap_runs
@@ -67,7 +67,7 @@ def run(out):
             truth = rig.joints(basis_matrices(rig, channels, location))
             below = rig.placed_by()
             job = quiet_job(rig, fps, kb)  # FILLS' candidates only auto makes
-            for n, l in BONE_SETTINGS:
+            for n, l in PROTOCOLS.bones:
                 if lengths and l not in lengths:
                     continue
                 label = f"n={n},l={l}"

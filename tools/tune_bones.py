@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from mocap_gapfill.core.bonefill import CANDIDATES, BoneConfig, _Job, gap_copies, halfway
-from mocap_gapfill.core.evaluate import (BONE_SETTINGS, kb_without, punch_bone_gaps,
+from mocap_gapfill.core.evaluate import (PROTOCOLS, kb_without, punch_bone_gaps,
                                          subject_of)
 from mocap_gapfill.core.io import read_rig_take
 from mocap_gapfill.core.kb import build_kb, load_kb
@@ -82,7 +82,7 @@ def main(out, names=CANDIDATES):
         if "charleston" in take:  # the two charleston takes are one (unknown) subject
             kb = kb.subset(np.array(["charleston" not in s for s in kb.sources])[kb.source_index])
         truth = rig.joints(basis_matrices(rig, channels, location))
-        for n, l in BONE_SETTINGS:
+        for n, l in PROTOCOLS.bones:
             label = f"n={n},l={l}"
             gaps = punch_bone_gaps(rig, len(channels), (n, l))
             seen = interpolate_channels(channels, gaps)

@@ -18,7 +18,7 @@ from collections import defaultdict
 import numpy as np
 
 from mocap_gapfill.core import bonefill
-from mocap_gapfill.core.evaluate import (BONE_SETTINGS, bone_errors, kb_without,
+from mocap_gapfill.core.evaluate import (PROTOCOLS, bone_errors, kb_without,
                                          punch_bone_gaps, subject_of)
 from mocap_gapfill.core.io import read_rig_take
 from mocap_gapfill.core.rig import basis_matrices, interpolate_channels
@@ -35,7 +35,7 @@ def run(out, share):
             rig, channels, location, fps = read_rig_take(path, skip_frames=0 if amc else 6)
             kb = kb_without(full, subject_of(path))
             truth = basis_matrices(rig, channels, location)
-            for n, l in BONE_SETTINGS:
+            for n, l in PROTOCOLS.bones:
                 gaps = punch_bone_gaps(rig, len(channels), (n, l))
                 if l < 60 or not gaps.any() or bonefill.gap_copies(
                         gaps, bonefill.BoneConfig.auto_copies, bonefill.BoneConfig.copy_margin):
