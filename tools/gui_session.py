@@ -98,6 +98,13 @@ def context_select(obj):
 STATE = {"step": 0}
 
 
+def still_running(wm):
+    """Whether a job runs; if so, its progress said as the panel shows it."""
+    if wm.mocap_gapfill.running:
+        say(f"progress {wm.mocap_gapfill.progress:.0f} % {wm.mocap_gapfill.message}")
+    return wm.mocap_gapfill.running
+
+
 def step():
     state = STATE
     window, area = view3d()
@@ -120,8 +127,7 @@ def step():
         state["step"] = 1
         return 0.05
     if state["step"] == 1:
-        if wm.mocap_gapfill.running:
-            say(f"progress {wm.mocap_gapfill.progress:.0f} % {wm.mocap_gapfill.message}")
+        if still_running(wm):
             return 0.05
         say("filled; showing", arm.mocap_gapfill.showing, "gaps filled:",
             sum(g.filled for g in arm.mocap_gapfill.gaps), "of", len(arm.mocap_gapfill.gaps))
@@ -303,8 +309,7 @@ def problems_step():
         state["step"] = 10.5
         return 0.05
     if state["step"] == 10.5:
-        if wm.mocap_gapfill.running:
-            say(f"progress {wm.mocap_gapfill.progress:.0f} % {wm.mocap_gapfill.message}")
+        if still_running(wm):
             return 0.05
         with bpy.context.temp_override(window=window, area=area):
             bpy.ops.ed.undo_push(message="Detect Gaps")
