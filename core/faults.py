@@ -128,6 +128,7 @@ def find_faults(motion, config=None, should_cancel=None):
     def check():
         if should_cancel and should_cancel():
             raise KeyboardInterrupt
+
     pos = np.array(motion.positions, dtype=np.float64)
     changed = np.zeros(pos.shape[:2], dtype=bool)
     if motion.parents is not None or pos.shape[1] < 4 or len(pos) < 3:

@@ -174,6 +174,10 @@ class AutoConfig:
     #: the windows of the knowledge base's motion (and of the take's own) on long gaps
     matching: MatchSettings = MatchSettings()
 
+    def long_gap_seconds(self, with_kb):
+        """How long a joint's gaps last on the mean for its long-gap estimates to join."""
+        return self.match_seconds if with_kb else self.alone_seconds
+
 
 @dataclass(frozen=True)
 class GapAccount:
@@ -417,7 +421,7 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg
     probe = validation_gaps(missing, cfg.probes,
                             least=0 if motion.parents is None else cfg.probe_frames,
                             enough=cfg.probe_frames)
-    seconds = cfg.match_seconds if kb is not None else cfg.alone_seconds
+    seconds = cfg.long_gap_seconds(kb is not None)
     with np.errstate(invalid="ignore"):
         long = (probe.any(axis=0) & (_mean_run(missing) >= seconds * motion.fps)
                 & (motion.parents is not None))
@@ -453,9 +457,9 @@ def _fill_auto(motion, kb, settings, progress, should_cancel, report, trace, cfg
     # own regression and a partner's pattern stand in for it (without a knowledge base too)
     weight[[p for p in map(motion.names.index, lacking) if own[p] == 0]] = 0.0
     start = 0.5 if probe.any() else 0.0  # of the progress: the copies' fill came first
-    knn = _kb_estimate(motion, rigid, weight, kb, long, (windows, own, by_partner),
-                       (seconds, cfg.regression, cfg.matching), settings,
-                       lambda f, m: progress(start + 0.5 * f, m), should_cancel, report, trace)
+    knn = _kb_estimate(motion, rigid, weight, kb, long, (windows, own, by_partner), settings,
+                       lambda f, m: progress(start + 0.5 * f, m), should_cancel, report, trace,
+                       cfg)
     # the rigid donors' squared spread at each frame and on the mean of each point's copies
     spreads = _squared_spreads(probe, spread, copies_spread)
     harder = _harder_for_partners(*spreads)
@@ -611,14 +615,12 @@ def _with_smooth_track(motion, out, probe, copies, weight, shares, harder, carri
     return out, eased, per_sample
 
 
-def _kb_estimate(motion, rigid, weight, kb, long, parts, long_gaps, settings, progress,
-                 should_cancel, report, trace):
+def _kb_estimate(motion, rigid, weight, kb, long, parts, settings, progress, should_cancel,
+                 report, trace, cfg):
     """The knowledge base's fill of the gaps (NaN without one), seeing the points the rigid
     partners carry alone (``weight`` 0) as observed (they are never another point's donors: an
     estimate carried on would add its error to the next); on ``long`` gaps joined by its
-    windows, the take's own regression and a partner's pattern at the shares ``parts``
-    (``long_gaps``: the seconds that make a gap long, the regression's and the windows'
-    settings)."""
+    windows, the take's own regression and a partner's pattern at the shares ``parts``."""
     from .recover import fill_knn
 
     ahead = (weight == 0)[None] & ~np.isnan(rigid[..., 0])
@@ -628,28 +630,25 @@ def _kb_estimate(motion, rigid, weight, kb, long, parts, long_gaps, settings, pr
         given, kb, settings, progress=progress, should_cancel=should_cancel,
         report=report).positions
     if long.any():
-        knn = _with_long_gap_estimates(knn, given, motion.missing, kb, long, parts, long_gaps,
-                                       should_cancel, trace)
+        knn = _with_long_gap_estimates(knn, given, motion.missing, kb, long, parts,
+                                       should_cancel, trace, cfg)
     return knn
 
 
-def _with_long_gap_estimates(knn, given, missing, kb, long, parts, long_gaps, should_cancel,
-                             trace):
+def _with_long_gap_estimates(knn, given, missing, kb, long, parts, should_cancel, trace, cfg):
     """The knowledge base's estimate ``knn`` of the points with ``long`` gaps joined, at the
     shares ``parts`` (per point), by its windows of motion, the take's own regression on the
     rest of the body and a partner's pattern, each made on the take as the knowledge base sees
-    it (``given``: the points rigid partners carry alone included) for its gaps (``missing``;
-    ``long_gaps``: the seconds that make a gap long, the regression's and the windows'
-    settings)."""
+    it (``given``: the points rigid partners carry alone included) for its gaps (``missing``)."""
     from .matching import fill_match
     from .regression import regress_points
 
     windows, own, by_partner = parts
-    seconds, regression, matching = long_gaps
+    seconds = cfg.long_gap_seconds(kb is not None)
     if (windows > 0).any():
         # matched as on the copies, over every point with long gaps (the stretches and the
         # take's own windows a point gets depend on which others are matched with it)
-        knn = _mix_in(knn, fill_match(given, kb, long, should_cancel, matching).positions,
+        knn = _mix_in(knn, fill_match(given, kb, long, should_cancel, cfg.matching).positions,
                       windows)
         trace(f"auto: windows of the knowledge base's motion join its models on "
                f"{int((windows > 0).sum())} points with gaps of {seconds:g} s or more")
@@ -657,7 +656,7 @@ def _with_long_gap_estimates(knn, given, missing, kb, long, parts, long_gaps, sh
         # on the rest of the body as the knowledge base sees it (the points rigid partners carry
         # alone included), as the copies' regression saw it
         knn = _mix_in(knn, regress_points(given.positions, given.names,
-                                          missing & (own > 0)[None], regression), own)
+                                          missing & (own > 0)[None], cfg.regression), own)
         trace(f"auto: the take's own regression on the rest of the body joins on "
                f"{int((own > 0).sum())} points with gaps of {seconds:g} s or more")
     if (by_partner > 0).any():

@@ -65,10 +65,10 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
     stretch's ends in full). ``on_stretch(done)`` is called before each stretch (progress;
     it may raise to stop). ``table``: :func:`pose_table` of ``kb_features``, where the caller
     keeps it between calls. ``lean``: per piece, the mean of the ``top`` best windows is
-    averaged, in equal parts, with the mean of the distinct ones among the ``lean`` best (True:
-    ``MatchSettings.lean``), near copies of each other included (a window one pose or one speed
-    off the best costs little more where the motion is smooth): where one window stands out,
-    its near copies crowd the others out of the second set, and the mean leans to it.
+    averaged, in equal parts, with the mean of the distinct ones among the
+    ``MatchSettings.lean`` best, near copies of each other included (a window one pose or one
+    speed off the best costs little more where the motion is smooth): where one window stands
+    out, its near copies crowd the others out of the second set, and the mean leans to it.
     """
     if not stretches:  # the table below costs a pass over the whole knowledge base
         return []
@@ -125,8 +125,7 @@ def match_windows(features, weight, kb_features, kb_source, fps, kb_fps, stretch
             if not sets[0]:
                 continue
             if lean:
-                most = MatchSettings.lean if lean is True else lean
-                sets.append(_distinct(candidates[:most], top, kb_source))
+                sets.append(_distinct(candidates[:MatchSettings.lean], top, kb_source))
             taper = np.clip(1 - np.abs(frames - centre) / max(half, 1e-9), 0, 1)
             taper[(frames < centre) & (piece == 0)] = 1.0
             taper[(frames > centre) & (piece == len(centres) - 1)] = 1.0

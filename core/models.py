@@ -58,8 +58,8 @@ class KnnSettings:
     #: where the root or hips were in a gap, normalise again with their fill and model again the
     #: frames whose normalisation moved (``auto``'s refill of its copies does without)
     renormalise: bool = True
-    #: ... the frames whose root moved more than this (m) or whose facing turned more than this
-    #: (degrees) once the hips are filled
+    #: that second pass models again the frames whose root moved more than this (m) or whose
+    #: facing turned more than this (degrees) once the hips are filled
     change_root: float = 0.01
     change_degrees: float = 1.0
     #: neighbours per frame when ``k`` is None
