@@ -19,6 +19,13 @@ def _owner_poll(cls, context):
     return True
 
 
+def _idle_poll(cls, context):
+    if context.window_manager.mocap_gapfill.running:
+        cls.poll_message_set("A gap search or fill is running (Esc cancels it)")
+        return False
+    return True
+
+
 def focus_gap(context, owner, index):
     """Select the gap's point (marker empty or bone) and jump to its first frame."""
     settings = owner.mocap_gapfill
@@ -168,10 +175,7 @@ class MOCAP_GAPFILL_OT_detect_gaps(JobOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if context.window_manager.mocap_gapfill.running:
-            cls.poll_message_set("A gap search or fill is running (Esc cancels it)")
-            return False
-        return _owner_poll(cls, context)
+        return _idle_poll(cls, context) and _owner_poll(cls, context)
 
     def prepare(self, context):
         settings = context.scene.mocap_gapfill
@@ -351,12 +355,7 @@ class MOCAP_GAPFILL_OT_fill_gaps(JobOperator, bpy.types.Operator):
     objects: StringProperty(name="Objects", description="Takes to fill, comma-separated "
                             "(default: the selected ones)", options={"SKIP_SAVE"})
 
-    @classmethod
-    def poll(cls, context):
-        if context.window_manager.mocap_gapfill.running:
-            cls.poll_message_set("A gap search or fill is running (Esc cancels it)")
-            return False
-        return True
+    poll = classmethod(_idle_poll)
 
     def prepare(self, context):
         settings = context.scene.mocap_gapfill
